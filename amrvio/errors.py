@@ -46,3 +46,10 @@ class ConfigError(AmrvioError):
 
 class ShapeError(AmrvioError, ValueError):
     """An array argument has the wrong shape or contains non-finite values."""
+
+
+class EvaluationError(AmrvioError):
+    """Two trajectories cannot be compared (no common stamps, too few poses to align).
+
+    The message says what to change (time offset, ``--max-diff``, ``--align``, ``--n-align``).
+    """

@@ -48,6 +48,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except AmrvioError as err:
         print(f"amrvio {args.command}: error: {err}", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # output piped into `head` and closed early: not an error
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print(f"amrvio {args.command}: interrupted", file=sys.stderr)
         return 130
