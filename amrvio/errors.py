@@ -22,10 +22,10 @@ class InputFileError(AmrvioError):
 
     def __init__(self, path: str | Path, problem: str, line: int | None = None) -> None:
         self.path = str(path)
-        self.problem = problem
+        self.problem = " ".join(problem.split())  # one line, whatever a parser put in it
         self.line = line
         where = f"{self.path}:{line}" if line is not None else self.path
-        super().__init__(f"{where}: {problem}")
+        super().__init__(f"{where}: {self.problem}")
 
 
 class DatasetFormatError(InputFileError):

@@ -13,7 +13,7 @@ import pytest
 from amrvio.cli.main import main
 from amrvio.eval import evaluate
 from amrvio.eval.example import EXAMPLE_EST, EXAMPLE_GT, make_example_pair
-from amrvio.io.trajectory import read_trajectory, write_kitti, write_tum
+from amrvio.io.trajectory import read_trajectory, write_euroc_csv, write_kitti, write_tum
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -93,3 +93,36 @@ def test_cli_eval_subprocess_bad_file(tmp_path: Path) -> None:
     assert len(lines) == 1, proc.stderr
     assert f"{bad}:3:" in lines[0] and "expected 8 columns" in lines[0]
     assert "Traceback" not in proc.stderr
+
+
+def test_cli_eval_euroc_csv_ground_truth(tmp_path: Path) -> None:
+    est, gt = make_example_pair(seed=2)
+    # EuRoC-like nanosecond clock: the CSV holds integer ns, the TUM estimate decimal seconds.
+    t0 = 1403715273.262142976
+    gt = gt.with_stamps(gt.stamps_s + t0)
+    est = est.with_stamps(est.stamps_s + t0)
+    gt_csv = tmp_path / "data.csv"
+    write_euroc_csv(gt_csv, gt)
+    write_tum(tmp_path / "est.txt", est)
+    out = tmp_path / "e.json"
+    rc = main(["eval", str(tmp_path / "est.txt"), str(gt_csv), "--align", "se3", "--json", str(out)])
+    assert rc == 0
+    js = json.loads(out.read_text())
+    ref = evaluate(est, gt, align="se3")
+    assert js["matched_poses"] == ref.matched_poses == len(est)
+    assert js["ate_rmse_m"] == pytest.approx(ref.ate.rmse, rel=1e-9)
+    assert js["rpe_rot_rmse_deg"] == pytest.approx(ref.rpe.rot_deg.rmse, rel=1e-9)
+    assert js["scale"] == pytest.approx(ref.scale, rel=1e-9)
+
+
+@pytest.mark.parametrize(("option", "value", "words"), [
+    ("--delta", "0", "must be > 0"), ("--delta", "x", "expected a number"),
+    ("--max-diff", "-1", "must be >= 0"), ("--n-align", "2.5", "expected an integer"),
+    ("--n-align", "0", "must be >= 1"),
+])
+def test_cli_eval_rejects_bad_option_values(option: str, value: str, words: str,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(["eval", str(EXAMPLE_EST), str(EXAMPLE_GT), option, value])
+    assert info.value.code == 2
+    assert words in capsys.readouterr().err

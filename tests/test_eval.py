@@ -354,10 +354,13 @@ def evo_figures(ref, est, align: str, delta: float, unit: Unit, n_align: int = -
     """evo's numbers, computed as evo_ape / evo_rpe do it (ref, est: evo trajectories)."""
     ref, est = evo_sync.associate_trajectories(ref, est, max_diff=0.01)
     est = copy.deepcopy(est)
+    scale: dict[str, float] = {}
     if align == "origin":
         est.align_origin(ref)
     elif align in ("se3", "sim3"):
-        est.align(ref, correct_scale=align == "sim3", n=n_align)
+        _, _, s = est.align(ref, correct_scale=align == "sim3", n=n_align)
+        if align == "sim3":
+            scale["scale"] = float(s)
     ape = evo_metrics.APE(PoseRelation.translation_part)
     ape.process_data((ref, est))
     rt = evo_metrics.RPE(PoseRelation.translation_part, delta, unit, all_pairs=all_pairs)
@@ -370,7 +373,7 @@ def evo_figures(ref, est, align: str, delta: float, unit: Unit, n_align: int = -
         "ate_max_m": a["max"], "ate_std_m": a["std"], "rpe_trans_rmse_m": t["rmse"],
         "rpe_trans_mean_m": t["mean"], "rpe_trans_max_m": t["max"], "rpe_rot_rmse_deg": r["rmse"],
         "rpe_rot_max_deg": r["max"], "matched_poses": float(ref.num_poses),
-        "rpe_pairs": float(len(rt.error)),
+        "rpe_pairs": float(len(rt.error)), **scale,
     }
 
 

@@ -3,42 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
+from amrvio.cli.args import non_negative_float, positive_float, positive_int
+
 NAME = "eval"
 HELP = "compare an estimated trajectory with ground truth (ATE, RPE, Sim3 scale, scale drift)"
-
-
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return v
-
-
-def _non_negative_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not v >= 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
-    return v
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
-    return v
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -51,7 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="alignment of the estimate before the errors (default: sim3, Umeyama with scale)",
     )
     parser.add_argument(
-        "--delta", type=_positive_float, default=1.0, help="RPE pair distance (default: 1)"
+        "--delta", type=positive_float, default=1.0, help="RPE pair distance (default: 1)"
     )
     parser.add_argument(
         "--delta-unit",
@@ -66,21 +37,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--max-diff",
-        type=_non_negative_float,
+        type=non_negative_float,
         default=0.01,
         metavar="S",
         help="largest stamp difference (s) to associate two poses (default: 0.01)",
     )
     parser.add_argument(
         "--n-align",
-        type=_positive_int,
+        type=positive_int,
         default=None,
         metavar="N",
         help="align on the first N associated poses only (default: all)",
     )
     parser.add_argument(
         "--drift-window",
-        type=_positive_float,
+        type=positive_float,
         default=None,
         metavar="M",
         help="scale-drift window length in metres of ground-truth path (default: 10%% of it)",
@@ -130,6 +101,7 @@ def format_table(summary: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from amrvio.cli.args import write_json
     from amrvio.errors import ConfigError
     from amrvio.eval import evaluate
     from amrvio.io.trajectory import read_trajectory
@@ -152,10 +124,7 @@ def run(args: argparse.Namespace) -> int:
     summary["gt_file"] = str(args.gt)
     print(format_table(summary))
     if args.json is not None:
-        try:
-            args.json.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-        except OSError as err:
-            raise ConfigError(f"--json {args.json}: cannot write: {err.strerror}") from None
+        write_json(args.json, summary)
     if args.plot is not None:
         from amrvio.report.plots import plot_eval
 

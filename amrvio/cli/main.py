@@ -9,10 +9,12 @@ code 1; the library itself never calls ``sys.exit``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import os
 import pkgutil
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from types import ModuleType
 
 from amrvio.errors import AmrvioError
@@ -40,13 +42,52 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+@contextlib.contextmanager
+def native_stderr_silenced() -> Iterator[None]:
+    """Send what C libraries write on file descriptor 2 to /dev/null; ``sys.stderr`` keeps the
+    terminal.
+
+    libpng, libjpeg and OpenCV print their own notes when an image is broken; amrvio's error line
+    already names the file, and a user must see exactly one line. Python output (errors, logging
+    warnings, tqdm) still goes to the real stderr. ``AMRVIO_NATIVE_STDERR=1`` keeps the notes.
+    """
+    try:
+        fd = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):  # a stream without a descriptor (pytest capsys)
+        fd = -1
+    if fd < 0 or os.environ.get("AMRVIO_NATIVE_STDERR") == "1":
+        yield
+        return
+    python_stderr = sys.stderr
+    python_stderr.flush()
+    saved = os.dup(fd)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, fd)
+    os.close(devnull)
+    sys.stderr = os.fdopen(saved, "w", buffering=1, encoding=python_stderr.encoding,
+                           errors="backslashreplace")
+    try:
+        yield
+    finally:
+        sys.stderr.flush()
+        os.dup2(saved, fd)
+        sys.stderr.close()
+        sys.stderr = python_stderr
+
+
+def one_line(text: str) -> str:
+    """``text`` with its line breaks (a YAML parser's context, say) folded into spaces."""
+    return " ".join(text.split())
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        rc: int = args._run(args)
+        with native_stderr_silenced():
+            rc: int = args._run(args)
     except AmrvioError as err:
-        print(f"amrvio {args.command}: error: {err}", file=sys.stderr)
+        print(f"amrvio {args.command}: error: {one_line(str(err))}", file=sys.stderr)
         return 1
     except BrokenPipeError:  # output piped into `head` and closed early: not an error
         sys.stderr.close()

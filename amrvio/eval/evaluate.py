@@ -155,16 +155,16 @@ def evaluate(
     est_m = _select_allow_repeats(est, idx_est)
     gt_m = _select_allow_repeats(gt, idx_gt)
     try:
-        S = align_trajectory(est_m, gt_m, method, n_align)
+        S_gtworld_estworld = align_trajectory(est_m, gt_m, method, n_align)
     except ShapeError as err:
         raise EvaluationError(
             f"cannot align with {method.value} on "
             f"{len(est_m) if n_align is None else min(n_align, len(est_m))} associated poses: {err}"
         ) from None
-    est_a = est_m.transformed(S)
+    est_a = est_m.transformed(S_gtworld_estworld)
     scale: float | None
     if method is AlignMethod.SIM3:
-        scale = S.s
+        scale = S_gtworld_estworld.s
     else:
         n = len(est_m) if n_align is None else min(n_align, len(est_m))
         try:
@@ -189,7 +189,7 @@ def evaluate(
         matched_poses=len(est_m),
         idx_est=idx_est,
         idx_gt=idx_gt,
-        alignment=S,
+        alignment=S_gtworld_estworld,
         est_aligned=est_a,
         gt_matched=gt_m,
         scale=scale,

@@ -119,8 +119,9 @@ def align_trajectory(
     if m is AlignMethod.NONE:
         return Sim3.identity()
     if m is AlignMethod.ORIGIN:
-        T = gt.pose(0) @ est.pose(0).inverse()
-        return Sim3.from_se3(T, 1.0)
+        # First estimate pose onto the first ground-truth pose (evo's align_origin).
+        T_gtworld_estworld = gt.pose(0) @ est.pose(0).inverse()
+        return Sim3.from_se3(T_gtworld_estworld, 1.0)
     n = len(est) if n_first is None else int(n_first)
     if n < 1:
         raise ShapeError(f"n_first must be >= 1, got {n}")

@@ -22,16 +22,13 @@ from amrvio.errors import DatasetFormatError, TrajectoryFormatError
 from amrvio.io.dataset import (
     Dataset,
     TextTable,
-    check_camera_size,
     check_columns,
-    check_declared_resolution,
     check_increasing,
-    check_vignette_size,
     find_photometric,
     first_image_shape,
     float_columns,
     int_column,
-    load_calibration,
+    load_checked_calibration,
     read_imu_csv,
     read_imu_noise_file,
     read_photometric,
@@ -141,12 +138,7 @@ def read_asl(path: Path, kind: str = "euroc", calib: Path | None = None) -> Data
             if candidate.is_file():
                 calib_path = candidate
                 break
-    camera = None
-    T_body_cam = None
-    if calib_path is not None:
-        check_declared_resolution(calib_path, image_hw, image_name)
-        camera, T_body_cam = load_calibration(calib_path, image_hw)
-        check_camera_size(camera, image_hw, calib_path, image_name)
+    camera, T_body_cam = load_checked_calibration(calib_path, image_hw, image_name)
 
     imu_path = mav / "imu0" / "data.csv"
     imu = read_imu_csv(imu_path) if imu_path.is_file() else None
@@ -160,9 +152,7 @@ def read_asl(path: Path, kind: str = "euroc", calib: Path | None = None) -> Data
     pcalib_path, vignette_path = find_photometric(
         [cam_dir, dso / "cam0", mav, base, *sorted(base.glob("photometric*"))]
     )
-    inverse_response, vignette = read_photometric(pcalib_path, vignette_path)
-    if vignette is not None and vignette_path is not None:
-        check_vignette_size(vignette, image_hw, vignette_path)
+    inverse_response, vignette = read_photometric(pcalib_path, vignette_path, image_hw)
     return Dataset(
         kind=kind,
         root=path,

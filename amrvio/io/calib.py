@@ -206,13 +206,13 @@ def _camera(
 # ----- YAML with line numbers ----------------------------------------------------------------
 
 
+@dataclass(frozen=True, slots=True)
 class _YamlDoc:
     """A parsed YAML mapping plus the 1-based line of every key (dotted path: ``cam0.intrinsics``)."""
 
-    def __init__(self, path: Path, data: dict[str, Any], lines: dict[str, int]) -> None:
-        self.path = path
-        self.data = data
-        self.lines = lines
+    path: Path
+    data: dict[str, Any]
+    lines: dict[str, int]
 
     def section(self, key: str) -> _YamlDoc:
         value = self.get(key)
@@ -416,15 +416,21 @@ def read_euroc_sensor_T_BS(path: str | Path) -> SE3:
     return _euroc_T_BS(_load_yaml(Path(path)))
 
 
+def _load_sensor_yaml(path: Path, sensor_type: str) -> _YamlDoc:
+    """An EuRoC/ASL ``sensor.yaml`` whose ``sensor_type`` (when present) is ``sensor_type``."""
+    doc = _load_yaml(path)
+    found = doc.data.get("sensor_type", sensor_type)
+    if found != sensor_type:
+        raise CalibrationError(
+            path, f"sensor_type is {found!r}, expected {sensor_type!r}", doc.line("sensor_type")
+        )
+    return doc
+
+
 def read_euroc_camera(path: str | Path) -> EurocCameraCalib:
     """An EuRoC/ASL camera ``sensor.yaml`` (``cam0/sensor.yaml``)."""
     p = Path(path)
-    doc = _load_yaml(p)
-    sensor_type = doc.data.get("sensor_type", "camera")
-    if sensor_type != "camera":
-        raise CalibrationError(
-            p, f"sensor_type is {sensor_type!r}, expected 'camera'", doc.line("sensor_type")
-        )
+    doc = _load_sensor_yaml(p, "camera")
     keys = {"model": "camera_model", "distortion_model": "distortion_model",
             "intrinsics": "intrinsics", "distortion": "distortion_coefficients",
             "resolution": "resolution"}
@@ -486,13 +492,7 @@ def write_euroc_camera(
 
 def read_euroc_imu(path: str | Path) -> ImuNoise:
     """Noise densities and rate of an EuRoC/ASL IMU ``sensor.yaml`` (``imu0/sensor.yaml``)."""
-    p = Path(path)
-    doc = _load_yaml(p)
-    sensor_type = doc.data.get("sensor_type", "imu")
-    if sensor_type != "imu":
-        raise CalibrationError(
-            p, f"sensor_type is {sensor_type!r}, expected 'imu'", doc.line("sensor_type")
-        )
+    doc = _load_sensor_yaml(Path(path), "imu")
     return _imu_noise(doc, "rate_hz")
 
 
@@ -500,9 +500,8 @@ def write_euroc_imu(
     path: str | Path, noise: ImuNoise, T_body_imu: SE3 | None = None, comment: str = ""
 ) -> None:
     """Write an EuRoC/ASL IMU ``sensor.yaml``."""
-    T = SE3.identity() if T_body_imu is None else T_body_imu
     lines = ["%YAML:1.0", "sensor_type: imu", f"comment: {comment!r}", ""]
-    lines += _euroc_T_BS_text(T)
+    lines += _euroc_T_BS_text(SE3.identity() if T_body_imu is None else T_body_imu)
     lines += [
         f"rate_hz: {_fmt(noise.rate_hz)}",
         "",

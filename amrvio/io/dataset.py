@@ -15,7 +15,7 @@ from __future__ import annotations
 import itertools
 import logging
 import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -144,6 +144,11 @@ def open_dataset(
     """
     kind, path = parse_spec(spec)
     if kind is None:
+        head, sep, _ = str(spec).partition(":")
+        if sep and not path.exists() and re.fullmatch(r"[a-z][a-z0-9_-]+", head):
+            raise DatasetFormatError(
+                spec, f"unknown dataset kind {head!r}; use one of {', '.join(KINDS)} or a bare PATH"
+            )
         kind = detect_kind(path)
     elif not path.exists():
         raise DatasetFormatError(path, f"{kind} dataset path does not exist")
@@ -266,17 +271,23 @@ def check_columns(table: TextTable, n_min: int, what: str, n_max: int | None = N
             raise DatasetFormatError(table.path, f"{what}: an empty column", line)
 
 
-def int_column(table: TextTable, col: int, what: str) -> I64:
-    """Column ``col`` as int64 (for example nanosecond timestamps)."""
+def _parsed_column(
+    table: TextTable, col: int, what: str, parse: Callable[[str], int], expected: str
+) -> I64:
     out = np.empty(len(table), dtype=np.int64)
     for i, (row, line) in enumerate(zip(table.rows, table.lines, strict=True)):
         try:
-            out[i] = int(row[col])
+            out[i] = parse(row[col])
         except (ValueError, OverflowError):
             raise DatasetFormatError(
-                table.path, f"{what}: {row[col]!r} is not an integer", line
+                table.path, f"{what}: {row[col]!r} is not {expected}", line
             ) from None
     return out
+
+
+def int_column(table: TextTable, col: int, what: str) -> I64:
+    """Column ``col`` as int64 (for example nanosecond timestamps)."""
+    return _parsed_column(table, col, what, int, "an integer")
 
 
 def float_columns(table: TextTable, cols: Sequence[int], what: str) -> F64:
@@ -326,15 +337,7 @@ def seconds_to_ns(text: str) -> int:
 
 def seconds_column_ns(table: TextTable, col: int, what: str) -> I64:
     """Column ``col`` of decimal seconds as int64 nanoseconds."""
-    out = np.empty(len(table), dtype=np.int64)
-    for i, (row, line) in enumerate(zip(table.rows, table.lines, strict=True)):
-        try:
-            out[i] = seconds_to_ns(row[col])
-        except (ValueError, OverflowError):
-            raise DatasetFormatError(
-                table.path, f"{what}: {row[col]!r} is not a finite time in seconds", line
-            ) from None
-    return out
+    return _parsed_column(table, col, what, seconds_to_ns, "a finite time in seconds")
 
 
 def check_increasing(table: TextTable, stamps_ns: I64, what: str) -> None:
@@ -385,17 +388,27 @@ def first_image_shape(frames: Sequence[Frame]) -> tuple[tuple[int, int], str]:
     return (int(img.shape[0]), int(img.shape[1])), name
 
 
+def _size_mismatch(
+    calib_path: Path, calib_wh: tuple[int, int], image_hw: tuple[int, int], image_name: str,
+    line: int | None,
+) -> CalibrationError:
+    return CalibrationError(
+        calib_path,
+        f"calibration is for {calib_wh[0]}x{calib_wh[1]} images but {image_name} is "
+        f"{image_hw[1]}x{image_hw[0]}; give the calibration of this camera (--calib FILE, or "
+        "open_dataset(..., calib=PATH))",
+        line,
+    )
+
+
 def check_camera_size(
     camera: CameraModel, image_hw: tuple[int, int], calib_path: Path, image_name: str
 ) -> None:
-    """CalibrationError naming ``calib_path`` when the camera size differs from the images."""
+    """CalibrationError naming ``calib_path`` and its size line when the camera size differs."""
     h, w = image_hw
     if (camera.width, camera.height) != (w, h):
-        raise CalibrationError(
-            calib_path,
-            f"calibration is for {camera.width}x{camera.height} images but {image_name} is "
-            f"{w}x{h}; give the calibration of this camera (open_dataset(..., calib=PATH))",
-            _line_of_key(calib_path, ("resolution", "Camera.width", "image_width", "width")),
+        raise _size_mismatch(
+            calib_path, (camera.width, camera.height), image_hw, image_name, _size_line(calib_path)
         )
 
 
@@ -406,6 +419,21 @@ def check_vignette_size(vignette: F64, image_hw: tuple[int, int], path: Path) ->
             f"vignette is {vignette.shape[1]}x{vignette.shape[0]} but the images are "
             f"{image_hw[1]}x{image_hw[0]}",
         )
+
+
+def _size_line(path: Path) -> int | None:
+    """The line that holds the image size: a yaml size key, else line 2 of a DSO camera.txt."""
+    line = _line_of_key(path, ("resolution", "Camera.width", "image_width", "width"))
+    if line is not None or path.suffix.lower() in (".yaml", ".yml"):
+        return line
+    try:
+        lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return None
+    if any(ln.strip().startswith("P0:") for ln in lines):
+        return None  # KITTI calib.txt: no size in the file
+    filled = [n for n, ln in enumerate(lines, start=1) if ln.strip()]
+    return filled[1] if len(filled) > 1 else None
 
 
 def _line_of_key(path: Path, keys: Sequence[str]) -> int | None:
@@ -446,12 +474,7 @@ def check_declared_resolution(path: Path, image_hw: tuple[int, int], image_name:
         return
     w, h, line = found
     if (w, h) != (image_hw[1], image_hw[0]):
-        raise CalibrationError(
-            path,
-            f"calibration is for {w}x{h} images but {image_name} is {image_hw[1]}x{image_hw[0]}; "
-            "give the calibration of this camera (open_dataset(..., calib=PATH))",
-            line,
-        )
+        raise _size_mismatch(path, (w, h), image_hw, image_name, line)
 
 
 def rethrow_as_dataset_error(err: InputFileError) -> DatasetFormatError:
@@ -590,6 +613,19 @@ def load_calibration(path: Path, image_hw: tuple[int, int]) -> tuple[CameraModel
     return cal.read_dso_camera(path).camera, None
 
 
+def load_checked_calibration(
+    calib_path: Path | None, image_hw: tuple[int, int], image_name: str
+) -> tuple[CameraModel | None, SE3 | None]:
+    """:func:`load_calibration` of ``calib_path`` checked against the (height, width) of the
+    images (``image_name`` names one in the error); (None, None) when ``calib_path`` is None."""
+    if calib_path is None:
+        return None, None
+    check_declared_resolution(calib_path, image_hw, image_name)
+    camera, T_body_cam = load_calibration(calib_path, image_hw)
+    check_camera_size(camera, image_hw, calib_path, image_name)
+    return camera, T_body_cam
+
+
 def read_imu_noise_file(path: Path) -> ImuNoise:
     """IMU noise from an EuRoC imu0 sensor.yaml or a Kalibr imu.yaml / TUM-VI imu_config.yaml."""
     from amrvio.io import calib as cal
@@ -611,11 +647,16 @@ def find_photometric(dirs: Sequence[Path]) -> tuple[Path | None, Path | None]:
 
 
 def read_photometric(
-    pcalib_path: Path | None, vignette_path: Path | None
+    pcalib_path: Path | None, vignette_path: Path | None, image_hw: tuple[int, int]
 ) -> tuple[F64 | None, F64 | None]:
-    """(inverse response (256,), vignette (H, W)) read by amrvio.io.calib; None where absent."""
+    """(inverse response (256,), vignette (H, W)) read by amrvio.io.calib; None where absent.
+
+    A vignette whose size differs from ``image_hw`` (height, width) is a CalibrationError.
+    """
     from amrvio.io import calib as cal
 
     response = None if pcalib_path is None else cal.read_pcalib(pcalib_path)
     vignette = None if vignette_path is None else cal.read_vignette(vignette_path)
+    if vignette is not None and vignette_path is not None:
+        check_vignette_size(vignette, image_hw, vignette_path)
     return response, vignette

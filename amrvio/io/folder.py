@@ -18,15 +18,12 @@ from amrvio.errors import DatasetFormatError
 from amrvio.io.dataset import (
     Dataset,
     TextTable,
-    check_camera_size,
     check_columns,
-    check_declared_resolution,
     check_increasing,
-    check_vignette_size,
     find_photometric,
     first_image_shape,
     int_column,
-    load_calibration,
+    load_checked_calibration,
     read_imu_csv,
     read_imu_noise_file,
     read_photometric,
@@ -139,12 +136,7 @@ def read_folder(path: Path, calib: Path | None = None) -> Dataset:
     calib_path = calib
     if calib_path is None:
         calib_path = next((path / n for n in CALIB_FILES if (path / n).is_file()), None)
-    camera = None
-    T_body_cam = None
-    if calib_path is not None:
-        check_declared_resolution(calib_path, image_hw, image_name)
-        camera, T_body_cam = load_calibration(calib_path, image_hw)
-        check_camera_size(camera, image_hw, calib_path, image_name)
+    camera, T_body_cam = load_checked_calibration(calib_path, image_hw, image_name)
 
     imu_path = next((path / n for n in IMU_FILES if (path / n).is_file()), None)
     imu = None if imu_path is None else read_imu_csv(imu_path)
@@ -152,9 +144,7 @@ def read_folder(path: Path, calib: Path | None = None) -> Dataset:
     if imu is not None and (path / "imu.yaml").is_file():
         imu_noise = read_imu_noise_file(path / "imu.yaml")
     pcalib_path, vignette_path = find_photometric([path])
-    response, vignette = read_photometric(pcalib_path, vignette_path)
-    if vignette is not None and vignette_path is not None:
-        check_vignette_size(vignette, image_hw, vignette_path)
+    response, vignette = read_photometric(pcalib_path, vignette_path, image_hw)
     return Dataset(
         kind="folder",
         root=path,

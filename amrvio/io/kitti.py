@@ -13,11 +13,10 @@ from pathlib import Path
 from amrvio.errors import DatasetFormatError, TrajectoryFormatError
 from amrvio.io.dataset import (
     Dataset,
-    check_camera_size,
     check_columns,
     check_increasing,
     first_image_shape,
-    load_calibration,
+    load_checked_calibration,
     read_table,
     rethrow_as_dataset_error,
     seconds_column_ns,
@@ -58,11 +57,9 @@ def read_kitti_odometry(path: Path, calib: Path | None = None) -> Dataset:
     )
     image_hw, image_name = first_image_shape(frames)
     calib_path = calib if calib is not None else path / "calib.txt"
-    camera = None
-    T_body_cam = None
-    if calib_path.is_file():
-        camera, T_body_cam = load_calibration(calib_path, image_hw)
-        check_camera_size(camera, image_hw, calib_path, image_name)
+    camera, T_body_cam = load_checked_calibration(
+        calib_path if calib_path.is_file() else None, image_hw, image_name
+    )
 
     groundtruth = None
     poses_path = find_poses(path)

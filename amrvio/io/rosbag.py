@@ -24,9 +24,8 @@ from numpy.typing import NDArray
 from amrvio.errors import DatasetFormatError
 from amrvio.io.dataset import (
     Dataset,
-    check_camera_size,
     first_image_shape,
-    load_calibration,
+    load_checked_calibration,
 )
 from amrvio.types.sensors import Frame, ImuData
 
@@ -240,12 +239,9 @@ def read_bag(
         Frame(t_ns=t, index=i, path=None, loader=BagImage(source, b, k))
         for i, (t, b, k) in enumerate(records)
     )
-    camera = None
-    T_body_cam = None
-    if calib is not None:
-        image_hw, image_name = first_image_shape(frames)
-        camera, T_body_cam = load_calibration(calib, image_hw)
-        check_camera_size(camera, image_hw, calib, image_name)
+    camera, T_body_cam = (None, None) if calib is None else load_checked_calibration(
+        calib, *first_image_shape(frames)
+    )
     return Dataset(
         kind="bag", root=path, frames=frames, camera=camera, T_body_cam=T_body_cam, imu=imu
     )

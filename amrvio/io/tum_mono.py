@@ -18,13 +18,11 @@ from numpy.typing import NDArray
 from amrvio.errors import DatasetFormatError
 from amrvio.io.dataset import (
     Dataset,
-    check_camera_size,
     check_columns,
     check_increasing,
-    check_vignette_size,
     first_image_shape,
     float_columns,
-    load_calibration,
+    load_checked_calibration,
     read_photometric,
     read_table,
     seconds_column_ns,
@@ -135,18 +133,16 @@ def read_tum_mono(path: Path, calib: Path | None = None) -> Dataset:
     if isinstance(first_loader, ZipImage):
         image_name = f"{first_loader.archive}!{first_loader.member}"
     calib_path = calib if calib is not None else path / "camera.txt"
-    camera = None
-    T_body_cam = None
-    if calib_path.is_file():
-        camera, T_body_cam = load_calibration(calib_path, image_hw)
-        check_camera_size(camera, image_hw, calib_path, image_name)
+    camera, T_body_cam = load_checked_calibration(
+        calib_path if calib_path.is_file() else None, image_hw, image_name
+    )
     pcalib = path / "pcalib.txt"
     vignette_path = path / "vignette.png"
     response, vignette = read_photometric(
-        pcalib if pcalib.is_file() else None, vignette_path if vignette_path.is_file() else None
+        pcalib if pcalib.is_file() else None,
+        vignette_path if vignette_path.is_file() else None,
+        image_hw,
     )
-    if vignette is not None:
-        check_vignette_size(vignette, image_hw, vignette_path)
     return Dataset(
         kind="tum-mono",
         root=path,

@@ -88,13 +88,17 @@ def so3_exp(omegas: ArrayLike) -> F64:
     return eye + a[..., None, None] * W + b[..., None, None] * (W @ W)
 
 
-def so3_log(rots: ArrayLike) -> F64:
-    """Inverse of :func:`so3_exp`: (N, 3, 3) -> (N, 3), (3, 3) -> (3,). Accurate near 0 and pi."""
+def _rotation_batch(rots: ArrayLike, what: str) -> tuple[F64, bool]:
+    """``rots`` as (N, 3, 3) float64 and whether it was one (3, 3) matrix (may be a view: read only)."""
     R = np.asarray(rots, dtype=np.float64)
     if R.shape[-2:] != (3, 3) or R.ndim not in (2, 3):
-        raise ShapeError(f"so3_log expects (3,3) or (N,3,3), got {R.shape}")
-    single = R.ndim == 2
-    R = R.reshape(-1, 3, 3)
+        raise ShapeError(f"{what} must be (3,3) or (N,3,3), got {R.shape}")
+    return R.reshape(-1, 3, 3), R.ndim == 2
+
+
+def so3_log(rots: ArrayLike) -> F64:
+    """Inverse of :func:`so3_exp`: (N, 3, 3) -> (N, 3), (3, 3) -> (3,). Accurate near 0 and pi."""
+    R, single = _rotation_batch(rots, "so3_log input")
     tr = np.trace(R, axis1=1, axis2=2)
     cos_t = np.clip((tr - 1.0) / 2.0, -1.0, 1.0)
     axis_sin = vee(R - np.transpose(R, (0, 2, 1))) / 2.0  # sin(t) * axis
@@ -156,11 +160,7 @@ def quat_wxyz_to_matrix(quats: ArrayLike) -> F64:
 
 def matrix_to_quat_wxyz(rots: ArrayLike) -> F64:
     """Rotation matrices (N, 3, 3) -> unit quaternions (N, 4) [w, x, y, z] with w >= 0."""
-    R = np.asarray(rots, dtype=np.float64)
-    if R.shape[-2:] != (3, 3) or R.ndim not in (2, 3):
-        raise ShapeError(f"rotation matrices must be (3,3) or (N,3,3), got {R.shape}")
-    single = R.ndim == 2
-    R = R.reshape(-1, 3, 3)
+    R, single = _rotation_batch(rots, "rotation matrices")
     # Shepperd's method: pick the largest of 4 candidates for numerical stability.
     tr = np.trace(R, axis1=1, axis2=2)
     cand = np.stack([tr, R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]], axis=1)

@@ -116,3 +116,39 @@ def test_phone_sensor_yaml_is_wrong_and_calib_override_works(shared_data: Path) 
                                                       0.00102205))
     assert ds.imu is None and ds.groundtruth is None
     assert ds.frames[50].load().shape == (1080, 1920)
+
+
+def test_info_on_the_real_sequences(shared_data: Path, tmp_path: Path,
+                                    capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from amrvio.cli.main import main
+
+    out = tmp_path / "info.json"
+    euroc = _folder(shared_data, EUROC)
+    assert main(["info", str(euroc), "--json", str(out)]) == 0
+    js = json.loads(out.read_text())
+    assert js["kind"] == "euroc" and js["frames"]["count"] == 95
+    assert js["frames"]["rate_hz"] == pytest.approx(20.0, abs=1e-3)
+    assert (js["frames"]["width"], js["frames"]["height"]) == (752, 480)
+    assert js["imu"]["samples"] == 29120 and js["imu"]["rate_hz"] == pytest.approx(200.0, abs=0.01)
+    assert js["imu"]["duration_s"] == pytest.approx(145.595, abs=1e-3)
+    assert js["groundtruth"]["path_length_m"] == pytest.approx(58.35, abs=0.05)  # MANIFEST
+    assert js["camera"]["fx"] == 458.654 and js["imu_noise"]["accel_noise_density"] == 2.0e-3
+    assert js["photometric"] == {"inverse_response": True, "vignette": True}
+
+    kitti = _folder(shared_data, KITTI)
+    assert main(["info", f"kitti:{kitti}", "--json", str(out)]) == 0
+    js = json.loads(out.read_text())
+    assert js["frames"]["count"] == 200 and js["frames"]["rate_hz"] == pytest.approx(9.65, abs=0.01)
+    assert js["groundtruth"]["path_length_m"] == pytest.approx(145.0, abs=3.0)  # README: 145 m
+
+    phone = _folder(shared_data, PHONE)
+    capsys.readouterr()
+    assert main(["info", str(phone)]) == 1  # its sensor.yaml claims 640x480
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "sensor.yaml:" in err and "1920x1080" in err
+    assert main(["info", str(phone), "--calib", str(phone / "calib_claimed" / "live.yaml"),
+                 "--json", str(out)]) == 0
+    js = json.loads(out.read_text())
+    assert js["frames"]["rate_hz"] == pytest.approx(15.6, abs=0.2) and js["imu"] is None
