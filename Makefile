@@ -18,7 +18,7 @@ demo: $(STAMP)
 	$(BIN)/python -m amrvio.demo --out demo_out
 
 lint: $(STAMP)
-	$(BIN)/ruff check amrvio tests bench
+	$(BIN)/ruff check amrvio tests bench examples
 	$(BIN)/mypy
 
 test: lint

@@ -1,0 +1,10 @@
+"""Per-frame diagnostics (seed section 1 "compute diagnostics", sections 2-5).
+
+- :mod:`~amrvio.diagnostics.blur`: variance of the Laplacian and the scene-normalised BlurScorer;
+- :mod:`~amrvio.diagnostics.smear`: gyro-predicted smear field over the exposure, exposure advice;
+- :mod:`~amrvio.diagnostics.exposure`: exposure change (affine gain/offset, EV) on KLT patches;
+- :mod:`~amrvio.diagnostics.parallax`: rotation-compensated parallax against a keyframe;
+- :mod:`~amrvio.diagnostics.excitation`: IMU excitation over a window (degenerate motion);
+- :mod:`~amrvio.diagnostics.frame`: the stage ``FrameDiagnostics(config).process(...) -> FrameHealth``;
+- :mod:`~amrvio.diagnostics.advice`: frame ranges with a cause and a recommendation.
+"""

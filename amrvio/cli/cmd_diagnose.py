@@ -1,0 +1,186 @@
+"""``amrvio diagnose DATASET --out DIR``: per-frame health record, plots and advice."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+NAME = "diagnose"
+HELP = "per-frame health (blur, gyro smear, exposure change, parallax, excitation) + advice"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("dataset", help="dataset spec (euroc:PATH, kitti:PATH, ... or a bare PATH)")
+    parser.add_argument("--out", type=Path, required=True, help="output folder")
+    parser.add_argument("--calib", type=Path, default=None, metavar="FILE",
+                        help="calibration file that overrides the dataset's own")
+    parser.add_argument("--max-frames", type=int, default=None, help="stop after N frames")
+    parser.add_argument("--assumed-exposure-ms", type=float, default=None,
+                        help="exposure used for the smear prediction when frames carry none "
+                        "(default: half the frame period, at most 10 ms)")
+    parser.add_argument("--smear-bound-px", type=float, default=2.0,
+                        help="smear bound of the exposure advice (default 2 px)")
+    parser.add_argument("--ev-step", type=float, default=0.3,
+                        help="|EV| that flags an exposure step (default 0.3)")
+    parser.add_argument("--gyro-bias", default="auto",
+                        help="'auto' (mean gyro of a still first second, if still), 'none', "
+                        "or 'x,y,z' in rad/s")
+    parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    parser.add_argument("--estimate-photometric", type=int, default=0, metavar="N",
+                        help="also estimate response, vignette and exposures from N frames spread "
+                        "over the sequence (writes photometric_estimate/)")
+
+
+def run(args: argparse.Namespace) -> int:
+    import csv
+    import sys
+    from dataclasses import replace
+
+    import numpy as np
+    from tqdm import tqdm
+
+    from amrvio.diagnostics.advice import make_advice
+    from amrvio.diagnostics.exposure import ExposureConfig
+    from amrvio.diagnostics.frame import DiagnosticsConfig, FrameDiagnostics, health_rows
+    from amrvio.errors import ConfigError
+    from amrvio.io.dataset import open_dataset
+
+    if not args.ev_step > 0 or not args.smear_bound_px > 0:
+        raise ConfigError("--ev-step and --smear-bound-px must be > 0")
+    if args.max_frames is not None and args.max_frames < 1:
+        raise ConfigError(f"--max-frames must be >= 1, got {args.max_frames}")
+    if args.assumed_exposure_ms is not None and not args.assumed_exposure_ms > 0:
+        raise ConfigError(f"--assumed-exposure-ms must be > 0, got {args.assumed_exposure_ms}")
+    ds = open_dataset(args.dataset, calib=args.calib)
+    if not ds.frames:
+        raise ConfigError(f"{args.dataset}: the dataset has no frames")
+    bias = None
+    if args.gyro_bias not in ("auto", "none"):
+        try:
+            bias = np.array([float(v) for v in args.gyro_bias.split(",")])
+        except ValueError:
+            bias = None
+        if bias is None or bias.shape != (3,):
+            raise ConfigError(f"--gyro-bias must be auto, none or x,y,z; got {args.gyro_bias!r}")
+    elif args.gyro_bias == "auto" and ds.imu is not None and len(ds.imu) > 50:
+        first = ds.imu.window(int(ds.imu.stamps_ns[0]), int(ds.imu.stamps_ns[0]) + 1_000_000_000)
+        g, a = np.asarray(first.gyro_rad_s), np.asarray(first.accel_m_s2)
+        h = a.shape[0] // 2
+        d0, d1 = a[:h].mean(axis=0), a[h:].mean(axis=0)
+        cosang = float(d0 @ d1 / (np.linalg.norm(d0) * np.linalg.norm(d1)))
+        # Still (vibration allowed): gravity direction steady to 1 deg, |mean a| ~ g and a
+        # small mean rate. Then the mean gyro is its bias.
+        if (cosang > np.cos(np.radians(1.0)) and abs(np.linalg.norm(a.mean(axis=0)) - 9.81) < 0.3
+                and np.linalg.norm(g.mean(axis=0)) < 0.15):
+            bias = g.mean(axis=0)
+    assumed_s: float | None = None
+    notes: list[str] = []
+    if ds.imu is not None and any(f.exposure_s is None for f in ds.frames):
+        if args.assumed_exposure_ms is not None:
+            assumed_s = args.assumed_exposure_ms * 1e-3
+        else:
+            t = np.array([f.t_ns for f in ds.frames], dtype=np.float64) * 1e-9
+            period = float(np.median(np.diff(t))) if t.size > 1 else 0.05
+            assumed_s = min(0.010, 0.5 * period)
+        notes.append(f"note: the dataset records no exposure times; the smear is predicted for an "
+                     f"assumed {assumed_s * 1e3:.1f} ms exposure (set --assumed-exposure-ms)")
+    if bias is not None:
+        notes.append("note: gyro bias " + " ".join(f"{v:.5f}" for v in bias)
+                     + " rad/s subtracted (from a still start, or --gyro-bias)")
+    cfg = DiagnosticsConfig(
+        assumed_exposure_s=assumed_s,
+        smear_bound_px=args.smear_bound_px,
+        exposure=replace(ExposureConfig(), ev_step=args.ev_step),
+    )
+    stage = FrameDiagnostics(cfg, ds.camera, ds.T_body_cam, ds.inverse_response, bias)
+    frames = ds.frames if args.max_frames is None else ds.frames[: args.max_frames]
+    records = []
+    prev_t: int | None = None
+    for fr in tqdm(frames, desc="diagnose", unit="frame", file=sys.stderr,
+                   disable=not sys.stderr.isatty()):
+        imu_win = None
+        if ds.imu is not None:
+            T = fr.exposure_s or cfg.assumed_exposure_s or 0.0
+            t0 = (prev_t if prev_t is not None else fr.t_ns - 2_000_000_000) - 10_000_000
+            imu_win = ds.imu.window(t0, fr.t_ns + int(T * 0.5e9) + 10_000_000)
+        records.append(stage.process(fr.load(), fr.t_ns, imu_win, fr.exposure_s, fr.index))
+        prev_t = fr.t_ns
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    cols, rows = health_rows(records)
+    with open(out / "health.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    advice = make_advice(records, cfg.smear_bound_px) + notes
+    (out / "advice.txt").write_text("\n".join(advice) + "\n", encoding="utf-8")
+    if not args.no_plots:
+        from amrvio.report.diagnostics_plots import plot_health
+
+        plot_health(records, out / "health.png", title=str(ds.root.name))
+    if args.estimate_photometric > 0:
+        _estimate_photometric(ds, frames, args.estimate_photometric, out, not args.no_plots)
+    n_blur = sum(r.blur_flag for r in records)
+    n_expo = sum(r.exposure_flag for r in records)
+    n_par = sum(r.low_parallax_flag for r in records)
+    print(f"{len(records)} frames: {n_blur} blurred, {n_expo} exposure steps, "
+          f"{n_par} low-parallax; wrote {out / 'health.csv'}, {out / 'advice.txt'}")
+    return 0
+
+
+def _estimate_photometric(ds: object, frames: object, n: int, out: Path, plots: bool) -> None:
+    """Estimate G, V and exposures from ``n`` frames; compare with the dataset's own files."""
+    import numpy as np
+
+    from amrvio.photometric.calibrate import (
+        CalibrationStatus,
+        estimate_photometric_calibration,
+        track_observations,
+    )
+    from amrvio.photometric.model import PhotometricCalibration
+
+    seq = list(frames)  # type: ignore[call-overload]
+    idx = np.unique(np.linspace(0, len(seq) - 1, min(n, len(seq))).round().astype(int))
+    chosen = [seq[i] for i in idx]
+    images = [f.load() for f in chosen]
+    times = [f.exposure_s for f in chosen]
+    known = all(t is not None and t > 0 for t in times)
+    obs = track_observations(images)
+    est = estimate_photometric_calibration(obs, np.array(times, float) if known else None)
+    d = out / "photometric_estimate"
+    d.mkdir(parents=True, exist_ok=True)
+    lines = [f"frames used: {len(images)}; exposures {'known' if known else 'estimated'}",
+             f"status: {est.status.value}; observations {est.n_observations}; "
+             f"rms {est.rms_dn:.2f} DN",
+             f"response: gamma {est.response.gamma:.4f}, coefficients "
+             + " ".join(f"{c:.4f}" for c in est.response.coeffs),
+             f"vignette: v1 {est.vignette.v1:.4f} v2 {est.vignette.v2:.4f} v3 {est.vignette.v3:.4f}"]
+    if est.status is not CalibrationStatus.TOO_FEW_OBSERVATIONS:
+        h, w = images[0].shape
+        cal = PhotometricCalibration.from_models(est.response, est.vignette, h, w)
+        cal.save(d / "pcalib.txt", d / "vignette.png")
+        s = np.arange(6, 250)
+        mine = cal.inverse_response / cal.inverse_response[250]
+        ref_lut = getattr(ds, "inverse_response", None)
+        if ref_lut is not None:
+            ref = np.asarray(ref_lut, float) - float(ref_lut[0])
+            ref = ref / ref[250]
+            rms = float(np.sqrt(np.mean((mine[s] - ref[s]) ** 2)))
+            lines.append(f"inverse response vs the dataset's pcalib.txt: RMS {rms * 100:.2f} % "
+                         "(both normalised to 1 at DN 250)")
+            if plots:
+                from amrvio.report.diagnostics_plots import plot_response_comparison
+
+                plot_response_comparison(np.arange(256), {"estimated": mine, "dataset": ref},
+                                         d / "response.png", "inverse response")
+        ref_v = getattr(ds, "vignette", None)
+        if ref_v is not None and cal.vignette is not None and ref_v.shape == cal.vignette.shape:
+            rv = np.asarray(ref_v, float) / float(np.max(ref_v))
+            rms_v = float(np.sqrt(np.mean((cal.vignette - rv) ** 2)))
+            lines.append(f"vignette vs the dataset's vignette.png: RMS {rms_v * 100:.2f} %")
+    if not known:
+        lines.append("exposures unknown: recovered up to one scale and the response-exponent "
+                     "gauge (see amrvio.photometric.calibrate)")
+    label = "exposures [s]" if known else "relative exposures t_i/t_0"
+    lines.append(f"{label}: " + " ".join(f"{t:.6g}" for t in est.exposures_s))
+    (d / "report.txt").write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -1,0 +1,108 @@
+"""Image blur score: variance of the Laplacian, normalised by recent sharp frames.
+
+``var_laplacian`` is the focus measure of seed section 5, ``s = Var(Delta I)``. Its absolute value
+depends on the scene (texture, contrast), so :class:`BlurScorer` divides it by the running median
+of the recent frames that were judged sharp: ``ratio ~= 1`` for a typical sharp frame and one
+threshold (default 0.5) works across scenes.
+"""
+
+from __future__ import annotations
+
+import statistics
+from collections import deque
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from amrvio.errors import ShapeError
+
+
+def var_laplacian(image: NDArray[np.generic], step: int = 1) -> float:
+    """Variance of the 3x3 Laplacian (cv2 ksize=1) of a grey image, on float (seed section 5).
+
+    ``image``: (H, W) grey, any numeric dtype; uint8 keeps the 0..255 scale.
+    ``step``: evaluate on every ``step``-th row and column of the Laplacian image (a subset, not a
+    resampled image: the Laplacian itself is always full resolution, so the value is an unbiased
+    estimate of the full-image variance; it only costs less to reduce).
+    """
+    img = np.asarray(image)
+    if img.ndim != 2 or img.shape[0] < 3 or img.shape[1] < 3:
+        raise ShapeError(f"var_laplacian expects a (H,W) grey image with H,W >= 3, got {img.shape}")
+    if step < 1:
+        raise ShapeError(f"step must be >= 1, got {step}")
+    if img.dtype != np.uint8 and img.dtype != np.float32:
+        img = img.astype(np.float32)
+        if not np.all(np.isfinite(img)):
+            raise ShapeError("image contains non-finite values")
+    lap = cv2.Laplacian(img, cv2.CV_32F, ksize=1)
+    if step > 1:
+        lap = np.ascontiguousarray(lap[::step, ::step])
+    _, std = cv2.meanStdDev(lap)
+    return float(std[0, 0]) ** 2
+
+
+@dataclass(frozen=True, slots=True)
+class BlurResult:
+    """Blur verdict of one frame.
+
+    ``score``: var_laplacian; ``reference``: running median of recent sharp scores used to
+    normalise; ``ratio = score / reference``; ``is_blurred``: ratio below the threshold.
+    """
+
+    score: float
+    reference: float
+    ratio: float
+    is_blurred: bool
+
+
+@dataclass(frozen=True, slots=True)
+class BlurScorerConfig:
+    """``window``: how many recent sharp scores the median uses. ``blur_ratio``: a frame with
+    ``ratio < blur_ratio`` is blurred. ``sharp_ratio``: frames with ``ratio >= sharp_ratio`` join the
+    reference window. ``reset_after``: after this many consecutive non-sharp frames the reference is
+    reset (the scene itself got less textured)."""
+
+    window: int = 15
+    blur_ratio: float = 0.5
+    sharp_ratio: float = 0.7
+    reset_after: int = 30
+
+
+class BlurScorer:
+    """Scene-normalised blur score. One call: ``update(score) -> BlurResult``."""
+
+    def __init__(self, config: BlurScorerConfig | None = None) -> None:
+        self.config = config or BlurScorerConfig()
+        if self.config.window < 1:
+            raise ShapeError("BlurScorerConfig.window must be >= 1")
+        self._sharp: deque[float] = deque(maxlen=self.config.window)
+        self._not_sharp_run: list[float] = []
+
+    def reset(self) -> None:
+        """Forget the sharp reference (e.g. after an exposure step changed the image statistics)."""
+        self._sharp.clear()
+        self._not_sharp_run.clear()
+
+    def update(self, score: float) -> BlurResult:
+        """Normalise ``score`` (var_laplacian of the new frame) and update the sharp reference."""
+        if not np.isfinite(score) or score < 0:
+            raise ShapeError(f"blur score must be finite and >= 0, got {score}")
+        cfg = self.config
+        if not self._sharp:
+            self._sharp.append(score)
+            return BlurResult(score, score, 1.0, False)
+        ref = statistics.median(self._sharp)
+        ratio = score / ref if ref > 0 else 1.0
+        if ratio >= cfg.sharp_ratio:
+            self._sharp.append(score)
+            self._not_sharp_run.clear()
+        else:
+            self._not_sharp_run.append(score)
+            if len(self._not_sharp_run) >= cfg.reset_after:
+                # The scene changed for good: restart from the best of the recent frames.
+                self._sharp.clear()
+                self._sharp.append(max(self._not_sharp_run))
+                self._not_sharp_run.clear()
+        return BlurResult(score, ref, ratio, ratio < cfg.blur_ratio)
