@@ -98,3 +98,16 @@ def test_frame_loads_lazily_and_reports_bad_images(tmp_path: Path) -> None:
         Frame(1, 1, bad).load()
     with pytest.raises(DatasetFormatError, match="missing"):
         Frame(2, 2, tmp_path / "c.png").load()
+
+
+def test_interpolated_at_matches_se3_interpolation() -> None:
+    tr = _traj(6, seed=4)
+    stamps = np.array([0.0, 0.05, 0.13, 0.3, 0.5])
+    out = tr.interpolated_at(stamps)
+    for k, t in enumerate(stamps):
+        i = min(int(t // 0.1), len(tr) - 2)
+        alpha = (t - tr.stamps_s[i]) / 0.1
+        expected = tr.pose(i).interpolate(tr.pose(i + 1), alpha)
+        np.testing.assert_allclose(out.pose(k).matrix(), expected.matrix(), atol=1e-9)
+    with pytest.raises(ShapeError, match="leave the trajectory"):
+        tr.interpolated_at(np.array([0.6]))

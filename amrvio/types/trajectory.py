@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from amrvio.errors import ShapeError
-from amrvio.types.lie import SE3, SO3, Sim3, matrix_to_quat_wxyz, quat_wxyz_to_matrix
+from amrvio.types.lie import SE3, SO3, Sim3, matrix_to_quat_wxyz, quat_wxyz_to_matrix, so3_exp, so3_log
 
 F64 = NDArray[np.float64]
 
@@ -126,3 +126,24 @@ class Trajectory:
 
     def with_stamps(self, stamps_s: ArrayLike) -> Trajectory:
         return Trajectory(np.asarray(stamps_s, dtype=np.float64), self.positions_m, self.quats_wxyz)
+
+    def interpolated_at(self, stamps_s: ArrayLike) -> Trajectory:
+        """Poses at ``stamps_s`` (M,), each inside [first, last] stamp: positions linearly,
+        rotations by geodesic interpolation (slerp) between the bracketing poses."""
+        t = np.asarray(stamps_s, dtype=np.float64)
+        if t.ndim != 1 or len(self) < 2:
+            raise ShapeError(f"need (M,) stamps and a trajectory of >= 2 poses, got {t.shape} and {len(self)}")
+        if t.size and (t.min() < self.stamps_s[0] or t.max() > self.stamps_s[-1]):
+            raise ShapeError(
+                f"stamps [{t.min():.9f}, {t.max():.9f}] s leave the trajectory's span "
+                f"[{self.stamps_s[0]:.9f}, {self.stamps_s[-1]:.9f}] s"
+            )
+        hi = np.clip(np.searchsorted(self.stamps_s, t, side="right"), 1, len(self) - 1)
+        lo = hi - 1
+        alpha = (t - self.stamps_s[lo]) / (self.stamps_s[hi] - self.stamps_s[lo])
+        p = (1 - alpha)[:, None] * self.positions_m[lo] + alpha[:, None] * self.positions_m[hi]
+        Rs = self.rotations()
+        R_lo = Rs[lo]
+        delta = so3_log(np.transpose(R_lo, (0, 2, 1)) @ Rs[hi]).reshape(-1, 3)
+        R = R_lo @ so3_exp(alpha[:, None] * delta).reshape(-1, 3, 3)
+        return Trajectory(t, p, matrix_to_quat_wxyz(R).reshape(-1, 4))
