@@ -48,6 +48,12 @@ def test_var_laplacian_matches_numpy_and_falls_with_blur() -> None:
     scores = [var_laplacian(cv2.blur(img, (k, 1))) for k in (1, 3, 5, 9, 15)]
     assert all(a > b for a, b in zip(scores, scores[1:], strict=False))
     assert var_laplacian(img, step=2) == pytest.approx(var_laplacian(img), rel=0.1)
+    # uint8 (int16 Laplacian) and float input give the same value, also at full contrast
+    edges = np.where(np.indices((40, 40)).sum(axis=0) % 2 == 0, 255, 0).astype(np.uint8)
+    for u8 in (img, edges):
+        for step in (1, 2):
+            assert var_laplacian(u8, step) == pytest.approx(
+                var_laplacian(u8.astype(np.float32), step), rel=1e-6)
 
 
 def test_var_laplacian_bad_input() -> None:

@@ -110,7 +110,7 @@ def test_calibration_from_simulated_frames_meets_accuracy() -> None:
     renderer = sim_render.SceneRenderer(sim_scene.make_scene("room", 0), cam)
     R_fwd = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
     sensor = sim_if.SensorModel(response=sim_if.CameraResponse(2.2),
-                                vignette=sim_if.RadialVignette(-0.3, 0.05, 0.0), noise=True)
+                                vignette=RadialVignette(-0.3, 0.05, 0.0), noise=True)
     rng = np.random.default_rng(0)
     images, exposures = [], []
     n = 40
@@ -136,3 +136,41 @@ def test_fit_response_to_lut_of_a_gamma_curve() -> None:
     resp, rms = fit_response_to_inverse_lut(lut)
     assert rms < 0.003
     assert _rms_inverse(resp.inverse_lut(), lut) < 0.003
+
+
+def test_calibration_from_a_sequence_written_by_the_simulator(tmp_path: Path) -> None:
+    """`simulate` with scripted EV steps (gamma 2.2 response, v1 = -0.3 vignette, handheld motion
+    with blur and sensor noise) -> read back -> track -> estimate with the recorded exposures.
+    Truth: the simulator's own pcalib.txt and vignette.png."""
+    from amrvio.io.dataset import open_dataset
+    from amrvio.photometric.model import compare_inverse_responses
+    from amrvio.sim.simulate import SimConfig, simulate
+
+    steps = "0.4:+1,0.8:-1.5,1.2:+1,1.6:-0.8,2.0:+1.2,2.4:-1,2.8:+0.6,3.2:-1.1,3.6:+1"
+    simulate(SimConfig(scene="room", motion="handheld", seconds=4.0, fps=10.0, width=376,
+                       height=240, ev_steps=steps, exposure_ms=8.0, response_gamma=2.2,
+                       vignette_v1=-0.3), tmp_path)
+    ds = open_dataset(tmp_path)
+    assert ds.inverse_response is not None and ds.vignette is not None
+    images = [f.load() for f in ds.frames]
+    exposures = np.array([f.exposure_s for f in ds.frames], dtype=np.float64)
+    assert np.ptp(np.log2(exposures)) > 1.4  # the steps span more than 1.4 EV
+    est = estimate_photometric_calibration(track_observations(images, max_points=250), exposures)
+    assert est.status is CalibrationStatus.OK
+    cmp = compare_inverse_responses(est.response.inverse_lut(), ds.inverse_response)
+    assert cmp.rms_scale_aligned < 0.02, cmp
+    assert cmp.rms_at_250 < 0.05, cmp  # carries the extrapolation to DN 250 (rarely unsaturated)
+    H, W = images[0].shape
+    assert _rms_vignette(est.vignette.map(H, W), ds.vignette) < 0.03
+
+
+def test_compare_inverse_responses_closed_forms() -> None:
+    from amrvio.photometric.model import compare_inverse_responses
+
+    ref = 255.0 * (np.arange(256) / 255.0) ** 2.2
+    same = compare_inverse_responses(3.0 * ref + 7.0, ref)  # scale and offset are gauge
+    assert same.rms_at_250 < 1e-12 and same.rms_scale_aligned < 1e-12
+    lin = compare_inverse_responses(np.arange(256.0), ref)
+    assert lin.rms_scale_aligned < lin.rms_at_250
+    with pytest.raises(ShapeError):
+        compare_inverse_responses(np.zeros(10), ref)

@@ -137,7 +137,7 @@ def _estimate_photometric(ds: object, frames: object, n: int, out: Path, plots: 
         estimate_photometric_calibration,
         track_observations,
     )
-    from amrvio.photometric.model import PhotometricCalibration
+    from amrvio.photometric.model import PhotometricCalibration, compare_inverse_responses
 
     seq = list(frames)  # type: ignore[call-overload]
     idx = np.unique(np.linspace(0, len(seq) - 1, min(n, len(seq))).round().astype(int))
@@ -159,15 +159,15 @@ def _estimate_photometric(ds: object, frames: object, n: int, out: Path, plots: 
         h, w = images[0].shape
         cal = PhotometricCalibration.from_models(est.response, est.vignette, h, w)
         cal.save(d / "pcalib.txt", d / "vignette.png")
-        s = np.arange(6, 250)
         mine = cal.inverse_response / cal.inverse_response[250]
         ref_lut = getattr(ds, "inverse_response", None)
         if ref_lut is not None:
             ref = np.asarray(ref_lut, float) - float(ref_lut[0])
             ref = ref / ref[250]
-            rms = float(np.sqrt(np.mean((mine[s] - ref[s]) ** 2)))
-            lines.append(f"inverse response vs the dataset's pcalib.txt: RMS {rms * 100:.2f} % "
-                         "(both normalised to 1 at DN 250)")
+            cmp = compare_inverse_responses(cal.inverse_response, ref)
+            lines.append(f"inverse response vs the dataset's pcalib.txt: RMS "
+                         f"{cmp.rms_scale_aligned * 100:.2f} % after the least-squares scale, "
+                         f"{cmp.rms_at_250 * 100:.2f} % with both normalised to 1 at DN 250")
             if plots:
                 from amrvio.report.diagnostics_plots import plot_response_comparison
 

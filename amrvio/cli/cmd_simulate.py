@@ -36,10 +36,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="replay: smoothing-spline penalty on positions (0 = interpolate)")
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--imu-noise", choices=("on", "off"), default="on")
+    parser.add_argument("--imu-noise", choices=("on", "off"), default="on",
+                        help="off: exact IMU samples and constant zero biases; imu0/sensor.yaml "
+                        "still lists the nominal ADIS16448 densities (an estimator needs them) "
+                        "and its comment says the data are exact")
     parser.add_argument("--imu-rate", type=float, default=200.0, metavar="HZ")
     parser.add_argument("--blur", choices=("on", "off"), default="on")
     parser.add_argument("--exposure-ms", type=float, default=12.0)
+    parser.add_argument("--gain", type=float, default=1.0,
+                        help="analog gain applied to the collected signal before the response")
     parser.add_argument("--sensor-noise", choices=("on", "off"), default="on",
                         help="shot and read noise of the image sensor")
     parser.add_argument("--ev-steps", default="", metavar="T:EV,...",
@@ -80,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
         imu_noise=args.imu_noise == "on",
         blur=args.blur == "on",
         exposure_ms=args.exposure_ms,
+        analog_gain=args.gain,
         sensor_noise=args.sensor_noise == "on",
         response_gamma=args.response_gamma,
         vignette_v1=args.vignette_v1,

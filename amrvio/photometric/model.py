@@ -114,9 +114,21 @@ class RadialVignette:
 
     def map(self, height: int, width: int) -> F64:
         """(H, W) vignette map (not renormalised: V = 1 at the centre)."""
+        if height <= 0 or width <= 0:
+            raise ShapeError(f"vignette map size must be positive, got {height}x{width}")
         vv, uu = np.mgrid[0:height, 0:width]
         uv = np.stack([uu.ravel(), vv.ravel()], axis=1)
         return self.at_radius(self.radius(uv, width, height)).reshape(height, width)
+
+    def check_physical(self) -> None:
+        """Raise ShapeError unless 0 < V(r) <= V(0) = 1 on r in [0, 1] (light only falls off).
+
+        Not enforced on construction: an estimate may leave this range and is still reported."""
+        v = self.at_radius(np.linspace(0.0, 1.0, 201))
+        if not np.all(np.isfinite(v)) or float(v.min()) <= 0.0:
+            raise ShapeError("vignette must stay positive for r in [0, 1]")
+        if float(v.max()) > 1.0 + 1e-12:
+            raise ShapeError("vignette must not exceed V(0) = 1 (light falls off towards the corners)")
 
 
 @dataclass(frozen=True, slots=True)
@@ -181,3 +193,40 @@ class PhotometricCalibration:
         if exposure_s is not None:
             energy = np.divide(energy, np.float32(exposure_s))
         return np.asarray(energy, dtype=np.float32)
+
+
+@dataclass(frozen=True, slots=True)
+class ResponseComparison:
+    """RMS difference of two inverse responses over DN ``low..high`` (fractions of full scale).
+
+    ``rms_at_250``: both normalised to 1 at DN 250. ``rms_scale_aligned``: the reference
+    normalised to 1 at DN 250, the estimate scaled by the least-squares factor. An inverse
+    response estimated from images is only defined up to one irradiance scale (t_i V L_j is
+    observed as a product, and the radiances L_j are free), so the aligned figure measures the
+    shape; the DN-250 figure also carries the error of extrapolating to a DN that is rarely
+    observed unsaturated.
+    """
+
+    rms_at_250: float
+    rms_scale_aligned: float
+
+
+def compare_inverse_responses(
+    inverse_response: NDArray[np.floating], reference: NDArray[np.floating], low: int = 6,
+    high: int = 249,
+) -> ResponseComparison:
+    """Compare two (256,) inverse responses (DSO pcalib convention); offsets at DN 0 removed."""
+    a = np.asarray(inverse_response, dtype=np.float64)
+    b = np.asarray(reference, dtype=np.float64)
+    if a.shape != (256,) or b.shape != (256,):
+        raise ShapeError(f"inverse responses must be (256,), got {a.shape} and {b.shape}")
+    if not (0 <= low < high < 256):
+        raise ShapeError(f"need 0 <= low < high < 256, got {low}, {high}")
+    a, b = a - a[0], b - b[0]
+    if not (a[250] > 0 and b[250] > 0):
+        raise ShapeError("inverse responses must increase to a positive value at DN 250")
+    s = slice(low, high + 1)
+    an, bn = a[s] / a[250], b[s] / b[250]
+    k = float(an @ bn) / float(an @ an)  # least-squares scale of the estimate onto the reference
+    return ResponseComparison(float(np.sqrt(np.mean((an - bn) ** 2))),
+                              float(np.sqrt(np.mean((k * an - bn) ** 2))))

@@ -5,12 +5,13 @@ Photometric model (seed §4 and §6.2; Engel et al. 2016 "A photometrically cali
     I(x) = G( gain * t * V(x) * B(x) + noise ),
 
 with ``B`` the scene radiance (SceneRenderer.irradiance), ``t`` the exposure time in seconds, ``V``
-the radial vignetting, ``G`` the camera response ([0, 1] -> [0, 1], monotone) and 8-bit quantisation
-with saturation. Energy units: ``t * V * B == 1`` fills the pixel's full well (and the 8-bit range at
-unit gain). Noise: photon shot noise on the collected electrons (Gaussian approximation of Poisson,
-variance = electrons; the well saturates at ``full_well_e``), amplified by the analog gain, plus read
-noise (in DN of the linear signal), drawn as one Gaussian per pixel; then clipping, the response curve
-and rounding to 8 bits.
+the radial vignetting (amrvio.photometric.model.RadialVignette: 1 + v1 r^2 + v2 r^4 + v3 r^6), ``G``
+the camera response ([0, 1] -> [0, 1], monotone) and 8-bit quantisation with saturation. Energy
+units: ``t * V * B == 1`` fills the pixel's full well (and the 8-bit range at unit gain). Noise:
+photon shot noise on the collected electrons (Gaussian approximation of Poisson, variance =
+electrons; the well saturates at ``full_well_e``), amplified by the analog gain, plus read noise (in
+DN of the linear signal), drawn as one Gaussian per pixel; then clipping, the response curve and
+rounding to 8 bits.
 
 Motion blur (seed §5, temporal integral): the image of an exposure window is the average of sub-frame
 radiance renders over ``[t_start, t_start + T]`` (midpoint rule), exposed once. The number of
@@ -30,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
+from amrvio.photometric.model import RadialVignette
 from amrvio.sim.render import SceneRenderer
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import SE3
@@ -100,40 +102,12 @@ def _response_lut(gamma: float, toe: float) -> U8:
 
 
 @functools.lru_cache(maxsize=16)
-def _vignette_map(v1: float, v2: float, v3: float, h: int, w: int) -> F32:
-    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
-    cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
-    r2 = ((xs - cx) ** 2 + (ys - cy) ** 2) / (cx * cx + cy * cy)
-    vmap = (1.0 + r2 * (v1 + r2 * (v2 + r2 * v3))).astype(np.float32)
+def _vignette_map(vignette: RadialVignette, h: int, w: int) -> F32:
+    """Read-only float32 (h, w) map of ``vignette`` (the model of amrvio.photometric.model),
+    cached: every frame of a run uses the same one."""
+    vmap = vignette.map(h, w).astype(np.float32)
     vmap.setflags(write=False)
     return vmap
-
-
-@dataclass(frozen=True, slots=True)
-class RadialVignette:
-    """V(r) = 1 + v1 r^2 + v2 r^4 + v3 r^6, r = distance to the image centre / half diagonal."""
-
-    v1: float = -0.25
-    v2: float = 0.0
-    v3: float = 0.0
-
-    def __post_init__(self) -> None:
-        r = np.linspace(0.0, 1.0, 201)
-        v = self.at(r)
-        if not np.all(np.isfinite(v)) or float(v.min()) <= 0.0:
-            raise ShapeError("vignette must stay positive for r in [0, 1]")
-        if float(v.max()) > 1.0 + 1e-12:
-            raise ShapeError("vignette must not exceed V(0) = 1 (light falls off towards the corners)")
-
-    def at(self, r: NDArray[np.floating]) -> F64:
-        r2 = np.asarray(r, dtype=np.float64) ** 2
-        return 1.0 + r2 * (self.v1 + r2 * (self.v2 + r2 * self.v3))
-
-    def map(self, h: int, w: int) -> F32:
-        """(h, w) read-only attenuation map, 1 at the centre."""
-        if h <= 0 or w <= 0:
-            raise ShapeError("vignette map size must be positive")
-        return _vignette_map(self.v1, self.v2, self.v3, int(h), int(w))
 
 
 @dataclass(frozen=True, slots=True)
@@ -147,12 +121,13 @@ class SensorModel:
 
     gain: float = 1.0
     response: CameraResponse = field(default_factory=CameraResponse)
-    vignette: RadialVignette = field(default_factory=RadialVignette)
+    vignette: RadialVignette = field(default_factory=lambda: RadialVignette(-0.25))
     full_well_e: float = 10000.0
     read_noise_dn: float = 1.0
     noise: bool = True
 
     def __post_init__(self) -> None:
+        self.vignette.check_physical()
         if not (math.isfinite(self.gain) and self.gain > 0):
             raise ShapeError(f"gain must be positive, got {self.gain}")
         if not (self.full_well_e > 0 and self.read_noise_dn >= 0):
@@ -181,7 +156,7 @@ def expose(
     h, w = E.shape
     # Collected energy as a fraction of the full well: t * V(x) * B(x)  (seed §4 photometric model)
     x = E.astype(np.float32) * np.float32(exposure_s)
-    x *= sensor.vignette.map(h, w)
+    x *= _vignette_map(sensor.vignette, h, w)
     if not np.all(np.isfinite(x)) or float(x.min()) < 0.0:
         raise ShapeError("irradiance must be finite and >= 0")
     if sensor.noise:

@@ -47,7 +47,7 @@ MOTIONS: tuple[str, ...] = (*MOTION_KINDS, "replay")
 # EuRoC cam0 radial-tangential coefficients (k1, k2, p1, p2), used for camera_model="radtan".
 EUROC_RADTAN = (-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05)
 SIM_OUTPUTS = ("mav0", "times.txt", "pcalib.txt", "vignette.png", "wheel_odometry.csv",
-               "sim_config.yaml")
+               "sim_frames.csv", "sim_config.yaml")
 
 Progress = Callable[[int, int], None]
 
@@ -57,11 +57,12 @@ class SimConfig:
     """Every parameter of a simulation run (recorded in sim_config.yaml).
 
     Camera: ``width`` x ``height`` at ``fps``, focal 0.61 * width (EuRoC-like field of view),
-    ``camera_model`` "pinhole" or "radtan" (EuRoC coefficients); ``sensor_noise`` toggles shot and
+    ``camera_model`` "pinhole" or "radtan" (EuRoC coefficients); ``analog_gain`` multiplies the
+    collected signal (and its shot noise) before the response, ``sensor_noise`` toggles shot and
     read noise, ``response_gamma`` shapes the response curve (1 = linear) and ``vignette_v1`` the
-    radial fall-off V = 1 + v1 r^2 (amrvio.sim.image_formation.SensorModel). Exposure: ``exposure_ms`` base,
-    optional ``ev_steps`` ("t:ev,..." relative steps) or ``auto_exposure``. ``blur_bursts``:
-    "t0:dur:omega,..." fast yaw oscillations added to the motion. ``wheel_slips``:
+    radial fall-off V = 1 + v1 r^2 (amrvio.sim.image_formation.SensorModel). Exposure:
+    ``exposure_ms`` base, optional ``ev_steps`` ("t:ev,..." relative steps) or ``auto_exposure``.
+    ``blur_bursts``: "t0:dur:omega,..." fast yaw oscillations added to the motion. ``wheel_slips``:
     "t0:dur:slip,...". Replay: ``trajectory`` (EuRoC CSV or TUM), optional ``imu_csv`` (EuRoC imu0
     layout, used instead of the synthetic IMU) and ``cam_extrinsic`` (a sensor.yaml with T_BS).
     """
@@ -82,6 +83,7 @@ class SimConfig:
     blur: bool = True
     max_subframe_px: float = 0.5
     exposure_ms: float = 12.0
+    analog_gain: float = 1.0
     sensor_noise: bool = True
     response_gamma: float = 1.0
     vignette_v1: float = -0.25
@@ -122,6 +124,8 @@ class SimConfig:
                 f"exposure {self.exposure_ms} ms does not fit in the frame period "
                 f"{1e3 / self.fps:.2f} ms (max 90 %)"
             )
+        if not (math.isfinite(self.analog_gain) and 0.0 < self.analog_gain <= 64.0):
+            raise ConfigError(f"analog gain must be in (0, 64], got {self.analog_gain}")
         if not (0.2 <= self.response_gamma <= 5.0):
             raise ConfigError(f"response gamma must be in [0.2, 5], got {self.response_gamma}")
         if not (-1.0 < self.vignette_v1 <= 0.0):
@@ -130,8 +134,11 @@ class SimConfig:
             raise ConfigError(f"replay smoothing must be >= 0, got {self.replay_smoothing}")
         if self.ev_steps and self.auto_exposure:
             raise ConfigError("use either --ev-steps or --auto-exposure, not both")
-        if self.imu_rate_hz <= 0 or self.wheel_rate_hz <= 0:
-            raise ConfigError("IMU and wheel rates must be > 0 Hz")
+        if not (math.isfinite(self.imu_rate_hz) and math.isfinite(self.wheel_rate_hz)
+                and self.imu_rate_hz > 0 and self.wheel_rate_hz > 0):
+            raise ConfigError("IMU and wheel rates must be finite and > 0 Hz")
+        if self.seed < 0:
+            raise ConfigError(f"--seed must be >= 0, got {self.seed}")
         parse_ev_steps(self.ev_steps)
         parse_blur_bursts(self.blur_bursts)
         parse_slips(self.wheel_slips)
@@ -205,27 +212,33 @@ class _Sources:
     T_body_cam: SE3
 
 
-def _synthetic_sources(config: SimConfig, scene: Any, rngs: list[np.random.Generator]) -> _Sources:
+def _synthetic_imu_sources(config: SimConfig, motion: Motion, rngs: list[np.random.Generator],
+                           stamp0_ns: int, T_body_cam: SE3) -> _Sources:
+    """Synthetic IMU from the motion's exact derivatives: with ``config.imu_noise`` EuRoC ADIS16448
+    white noise, bias random walk and random initial biases (rngs[0]: biases, rngs[1]: noise)."""
     from amrvio.sim.imu_synth import synthesize_imu
 
-    motion = make_motion(config.motion, config.seconds, layout_for_scene(scene), config.seed,
-                         parse_blur_bursts(config.blur_bursts))
     noise = dataclasses.replace(ImuNoise.euroc_adis16448(), rate_hz=config.imu_rate_hz)
     if config.imu_noise:
         bg0 = rngs[0].standard_normal(3) * config.initial_gyro_bias_sigma
         ba0 = rngs[0].standard_normal(3) * config.initial_accel_bias_sigma
-        syn = synthesize_imu(motion, config.imu_rate_hz, noise, rngs[1], config.start_ns, bg0, ba0)
+        syn = synthesize_imu(motion, config.imu_rate_hz, noise, rngs[1], stamp0_ns, bg0, ba0)
     else:
-        syn = synthesize_imu(motion, config.imu_rate_hz, None, None, config.start_ns)
+        syn = synthesize_imu(motion, config.imu_rate_hz, None, None, stamp0_ns)
     return _Sources(motion, syn.imu, syn.t_s, syn.gyro_bias, syn.accel_bias, noise,
-                    "synthetic" if config.imu_noise else "synthetic-exact", config.start_ns,
-                    default_T_body_cam(config.camera_pitch_deg))
+                    "synthetic" if config.imu_noise else "synthetic-exact", stamp0_ns, T_body_cam)
+
+
+def _synthetic_sources(config: SimConfig, scene: Any, rngs: list[np.random.Generator]) -> _Sources:
+    motion = make_motion(config.motion, config.seconds, layout_for_scene(scene), config.seed,
+                         parse_blur_bursts(config.blur_bursts))
+    return _synthetic_imu_sources(config, motion, rngs, config.start_ns,
+                                  default_T_body_cam(config.camera_pitch_deg))
 
 
 def _replay_sources(config: SimConfig, rngs: list[np.random.Generator]) -> _Sources:
     from amrvio.io.calib import read_euroc_imu, read_euroc_sensor_T_BS
     from amrvio.io.dataset import read_imu_csv
-    from amrvio.sim.imu_synth import synthesize_imu
     from amrvio.sim.replay import load_groundtruth, make_replay_motion
 
     gt_path = Path(str(config.trajectory))
@@ -254,16 +267,7 @@ def _replay_sources(config: SimConfig, rngs: list[np.random.Generator]) -> _Sour
         zeros = np.zeros((t.shape[0], 3))
         return _Sources(motion, imu, t, zeros if gb is None else gb, zeros if ab is None else ab,
                         noise, "recorded", motion.t0_ns, T_body_cam)
-    noise = dataclasses.replace(ImuNoise.euroc_adis16448(), rate_hz=config.imu_rate_hz)
-    if config.imu_noise:
-        syn = synthesize_imu(motion, config.imu_rate_hz, noise, rngs[1], motion.t0_ns,
-                             rngs[0].standard_normal(3) * config.initial_gyro_bias_sigma,
-                             rngs[0].standard_normal(3) * config.initial_accel_bias_sigma)
-    else:
-        syn = synthesize_imu(motion, config.imu_rate_hz, None, None, motion.t0_ns)
-    return _Sources(motion, syn.imu, syn.t_s, syn.gyro_bias, syn.accel_bias, noise,
-                    "synthetic" if config.imu_noise else "synthetic-exact", motion.t0_ns,
-                    T_body_cam)
+    return _synthetic_imu_sources(config, motion, rngs, motion.t0_ns, T_body_cam)
 
 
 def _scene_offset(motion: Motion, scene: Any) -> SE3:
@@ -311,16 +315,12 @@ def _plain(x: Any) -> Any:
 def simulate(config: SimConfig, out_dir: Path, progress: Progress | None = None,
              force: bool = False) -> SimSummary:
     """Run the simulation and write the sequence to ``out_dir`` (see amrvio.sim.writer)."""
-    from amrvio.sim.image_formation import (
-        CameraResponse,
-        RadialVignette,
-        SensorModel,
-        render_frame,
-    )
+    from amrvio.photometric.model import RadialVignette
+    from amrvio.sim.image_formation import CameraResponse, SensorModel, render_frame
     from amrvio.sim.render import SceneRenderer
     from amrvio.sim.scene import make_scene
     from amrvio.sim.wheel import WheelConfig, synthesize_wheel, write_wheel_csv
-    from amrvio.sim.writer import SequenceWriter
+    from amrvio.sim.writer import FrameRecord, SequenceWriter
 
     out_dir = Path(out_dir)
     prepare_out_dir(out_dir, force)
@@ -340,7 +340,14 @@ def simulate(config: SimConfig, out_dir: Path, progress: Progress | None = None,
     writer = SequenceWriter(out_dir)
     # ground truth at the IMU stamps
     gt = motion.states(src.imu_t_s)
-    writer.write_imu(src.imu, src.imu_noise)
+    # The densities in imu0/sensor.yaml stay the nominal ADIS16448 values even for exact data
+    # (--imu-noise off): an estimator needs nonzero noise to weight its factors. The comment line
+    # and sim_config.yaml (imu_source) say whether the samples carry that noise.
+    imu_comment = {"synthetic": "amrvio simulated IMU (noise and bias random walk at these densities)",
+                   "synthetic-exact": "amrvio simulated IMU, EXACT data (--imu-noise off): the "
+                   "densities are nominal values for the estimator, the samples carry no noise",
+                   "recorded": "amrvio replay: recorded IMU, densities of the source"}[src.imu_source]
+    writer.write_imu(src.imu, src.imu_noise, imu_comment)
     writer.write_groundtruth(src.imu.stamps_ns, gt.R_world_body, gt.p_world, gt.v_world,
                              src.gyro_bias, src.accel_bias)
     wheel_cfg = WheelConfig(rate_hz=config.wheel_rate_hz, scale_error=config.wheel_scale_error,
@@ -356,7 +363,7 @@ def simulate(config: SimConfig, out_dir: Path, progress: Progress | None = None,
     base = config.exposure_ms * 1e-3
     planned = scripted_exposures(t_frames, base, parse_ev_steps(config.ev_steps), limits)
     ae = AutoExposure() if config.auto_exposure else None
-    sensor = SensorModel(response=CameraResponse(config.response_gamma),
+    sensor = SensorModel(gain=config.analog_gain, response=CameraResponse(config.response_gamma),
                          vignette=RadialVignette(config.vignette_v1), noise=config.sensor_noise)
     renderer = SceneRenderer(scene, camera)
 
@@ -364,6 +371,7 @@ def simulate(config: SimConfig, out_dir: Path, progress: Progress | None = None,
         return T_scene_world @ motion.T_world_body(t) @ T_body_cam
 
     exposures: list[float] = []
+    records: list[FrameRecord] = []
     max_smear = 0.0
     exposure = base
     for k in range(n_frames):
@@ -376,12 +384,16 @@ def simulate(config: SimConfig, out_dir: Path, progress: Progress | None = None,
                              max_subframe_px=config.max_subframe_px)
         writer.write_frame(stamps[k], frame.image)
         exposures.append(exposure)
+        records.append(FrameRecord(stamps[k], exposure, float(frame.smear_px_max),
+                                   float(frame.smear_px_center), int(frame.n_subframes),
+                                   float(frame.image.mean())))
         max_smear = max(max_smear, float(frame.smear_px_max))
         if ae is not None:
             exposure = ae.next_exposure(exposure, float(frame.image.mean()), limits)
         if progress is not None:
             progress(k + 1, n_frames)
     writer.finish_camera(camera, T_body_cam, config.fps, exposures)
+    writer.write_frames(records)
     writer.write_photometric(sensor.response.inverse_lut(),
                              sensor.vignette.map(camera.height, camera.width))
 

@@ -8,6 +8,8 @@ OUT/
   pcalib.txt        256 values of the inverse response G^-1 (DSO convention)
   vignette.png      16-bit vignette, max = 65535
   wheel_odometry.csv
+  sim_frames.csv    per frame: t_ns, exposure_s, true smear (max over the image and at the
+                    principal point, px), sub-frames averaged, mean intensity (DN)
   sim_config.yaml   every parameter and the seed
 
 The yaml, pcalib and vignette writers are amrvio.io.calib's. Every float is written with a
@@ -18,6 +20,7 @@ clock, so the same inputs give byte-identical files.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +51,58 @@ def ns_to_s_text(t_ns: int) -> str:
     sign = "-" if t_ns < 0 else ""
     a = abs(int(t_ns))
     return f"{sign}{a // 1_000_000_000}.{a % 1_000_000_000:09d}"
+
+
+SIM_FRAMES_HEADER = "t_ns,exposure_s,smear_px_max,smear_px_center,n_subframes,mean_intensity_dn"
+
+
+@dataclass(frozen=True, slots=True)
+class FrameRecord:
+    """Simulator truth of one frame (a row of sim_frames.csv).
+
+    ``smear_px_max`` / ``smear_px_center``: image-motion path length of the visible scene points
+    over the exposure (rotation and translation, from the depth map), max over the image and at
+    the principal point (amrvio.sim.image_formation.predict_smear). ``mean_intensity_dn``: mean of
+    the written 8-bit image.
+    """
+
+    t_ns: int
+    exposure_s: float
+    smear_px_max: float
+    smear_px_center: float
+    n_subframes: int
+    mean_intensity_dn: float
+
+
+def write_frames_csv(path: Path, records: Sequence[FrameRecord]) -> None:
+    """sim_frames.csv: one :class:`FrameRecord` per line (shortest round-trip floats)."""
+    lines = [SIM_FRAMES_HEADER]
+    for r in records:
+        lines.append(f"{int(r.t_ns)},{_f(r.exposure_s)},{_f(r.smear_px_max)},"
+                     f"{_f(r.smear_px_center)},{int(r.n_subframes)},{_f(r.mean_intensity_dn)}")
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def read_frames_csv(path: Path) -> list[FrameRecord]:
+    """Read sim_frames.csv back (raises DatasetFormatError on a malformed line)."""
+    from amrvio.errors import DatasetFormatError
+
+    text = Path(path).read_text(encoding="utf-8").splitlines()
+    if not text or text[0].strip() != SIM_FRAMES_HEADER:
+        raise DatasetFormatError(path, f"expected the header {SIM_FRAMES_HEADER!r}", line=1)
+    out: list[FrameRecord] = []
+    for i, line in enumerate(text[1:], start=2):
+        if not line.strip():
+            continue
+        v = line.split(",")
+        try:
+            if len(v) != 6:
+                raise ValueError
+            out.append(FrameRecord(int(v[0]), float(v[1]), float(v[2]), float(v[3]), int(v[4]),
+                                   float(v[5])))
+        except ValueError:
+            raise DatasetFormatError(path, "expected 6 numeric fields", line=i) from None
+    return out
 
 
 def write_imu_csv(path: Path, imu: ImuData) -> None:
@@ -99,9 +154,9 @@ class SequenceWriter:
                            comment="amrvio simulated camera")
         write_times_txt(self.root / "times.txt", self._frames, exposures_s)
 
-    def write_imu(self, imu: ImuData, noise: ImuNoise) -> None:
+    def write_imu(self, imu: ImuData, noise: ImuNoise, comment: str = "amrvio simulated IMU") -> None:
         write_imu_csv(self.mav / "imu0" / "data.csv", imu)
-        write_euroc_imu(self.mav / "imu0" / "sensor.yaml", noise, comment="amrvio simulated IMU")
+        write_euroc_imu(self.mav / "imu0" / "sensor.yaml", noise, comment=comment)
 
     def write_groundtruth(self, stamps_ns: NDArray[np.int64], R_world_body: F64, p_world: F64,
                           v_world: F64, gyro_bias: F64, accel_bias: F64) -> None:
@@ -119,6 +174,9 @@ class SequenceWriter:
     def write_photometric(self, inverse_response: ArrayLike, vignette: ArrayLike) -> None:
         write_pcalib(self.root / "pcalib.txt", inverse_response)
         write_vignette(self.root / "vignette.png", vignette)
+
+    def write_frames(self, records: Sequence[FrameRecord]) -> None:
+        write_frames_csv(self.root / "sim_frames.csv", records)
 
     def write_config(self, record: dict[str, Any]) -> None:
         import yaml

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from amrvio.errors import ShapeError
+from amrvio.photometric.model import RadialVignette
 from amrvio.sim import textures as tx
 from amrvio.sim.image_formation import (
     CameraResponse,
-    RadialVignette,
     SensorModel,
     expose,
     render_frame,
@@ -60,9 +60,10 @@ def test_vignette_map_properties():
     row = m[240, 376:]
     assert np.all(np.diff(row) <= 0)
     with pytest.raises(ShapeError):
-        RadialVignette(-1.2)  # goes negative
+        SensorModel(vignette=RadialVignette(-1.2))  # goes negative
     with pytest.raises(ShapeError):
-        RadialVignette(0.3)  # brighter at the corners
+        SensorModel(vignette=RadialVignette(0.3))  # brighter at the corners
+    assert SensorModel().vignette == RadialVignette(-0.25)  # the simulator's default fall-off
 
 
 def _irradiance(h=120, w=160, seed=0):

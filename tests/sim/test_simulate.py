@@ -103,6 +103,10 @@ def test_config_errors() -> None:
         SimConfig(ev_steps="1:1", auto_exposure=True)
     with pytest.raises(ConfigError):
         SimConfig(blur_bursts="1:2")
+    with pytest.raises(ConfigError, match="seed"):
+        SimConfig(seed=-3)
+    with pytest.raises(ConfigError, match="rates"):
+        SimConfig(imu_rate_hz=float("nan"))
 
 
 def test_refuses_non_empty_out_dir(tmp_path: Path) -> None:
@@ -144,7 +148,7 @@ def two_runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 def test_same_seed_gives_byte_identical_trees(two_runs: tuple[Path, Path]) -> None:
     a, b = two_runs
     ta, tb = _tree(a), _tree(b)
-    assert len(ta) == 20 + 10  # 20 PNG frames + 10 other files
+    assert len(ta) == 20 + 11  # 20 PNG frames + 11 other files
     assert ta.keys() == tb.keys()
     for name in ta:
         assert ta[name] == tb[name], name
@@ -192,6 +196,17 @@ def test_output_reads_back_through_open_dataset(two_runs: tuple[Path, Path]) -> 
     np.testing.assert_allclose(exp_ms, np.where(t_s - 1.0 >= 1.0, 24.0, 12.0))
     assert (out / "wheel_odometry.csv").read_text().count("\n") == 101 + 1
     assert (out / "sim_config.yaml").read_text().count("seed: 3") == 1
+    # sim_frames.csv: one row per frame, aligned with the frame stamps and times.txt
+    from amrvio.sim.writer import read_frames_csv
+
+    truth = read_frames_csv(out / "sim_frames.csv")
+    np.testing.assert_array_equal([r.t_ns for r in truth], stamps)
+    np.testing.assert_allclose([r.exposure_s * 1e3 for r in truth], exp_ms)
+    np.testing.assert_allclose([r.mean_intensity_dn for r in truth],
+                               [f.load().mean() for f in ds.frames])
+    smear = np.array([r.smear_px_max for r in truth])
+    assert smear.max() > 2.0 and np.all(np.array([r.smear_px_center for r in truth]) <= smear)
+    assert all(r.n_subframes % 2 == 1 and r.n_subframes >= r.smear_px_max / 0.5 for r in truth)
 
 
 def test_noise_free_run_integrates_back_to_groundtruth(tmp_path: Path) -> None:
@@ -205,6 +220,8 @@ def test_noise_free_run_integrates_back_to_groundtruth(tmp_path: Path) -> None:
     cfg = SimConfig(scene="room", motion="handheld", imu_noise=False, blur=False, width=64,
                     height=48, seconds=3.0, fps=5.0)
     simulate(cfg, tmp_path)
+    # sensor.yaml keeps nominal densities for the estimator and says the data are exact
+    assert "EXACT data" in (tmp_path / "mav0/imu0/sensor.yaml").read_text()
     ds = open_dataset(f"euroc:{tmp_path}")
     gt = read_euroc_csv(tmp_path / "mav0/state_groundtruth_estimate0/data.csv")
     assert ds.imu is not None and gt.velocities_m_s is not None
@@ -272,6 +289,11 @@ def test_cli_simulate_writes_and_refuses_to_overwrite(tmp_path: Path,
     assert len(list((out / "mav0/cam0/data").iterdir())) == 4
     assert main(["simulate", "--motion", "replay", "--out", str(tmp_path / "x")]) == 1
     assert "--trajectory" in capsys.readouterr().err
+    for bad in (["--seed", "-3"], ["--seconds", "0"], ["--imu-rate", "nan"],
+                ["--ev-steps", "1:x"], ["--motion", "replay", "--trajectory", str(tmp_path / "no.csv")]):
+        assert main(["simulate", *bad, "--out", str(tmp_path / "y")]) == 1, bad
+        err = capsys.readouterr().err.strip()
+        assert err and "\n" not in err and "Traceback" not in err, bad
 
 
 @pytest.mark.parametrize("scene_name", ["corridor", "warehouse", "room"])
@@ -293,7 +315,8 @@ def test_every_motion_stays_in_the_free_floor_area(scene_name: str) -> None:
 
 def test_auto_exposure_and_photometric_files(tmp_path: Path) -> None:
     from amrvio.io.dataset import open_dataset
-    from amrvio.sim.image_formation import CameraResponse, RadialVignette
+    from amrvio.photometric.model import RadialVignette
+    from amrvio.sim.image_formation import CameraResponse
     from amrvio.sim.simulate import SimConfig, simulate
 
     cfg = SimConfig(scene="room", motion="constant-velocity", seconds=2.0, fps=10.0, width=48,
@@ -314,3 +337,23 @@ def test_auto_exposure_and_photometric_files(tmp_path: Path) -> None:
     np.testing.assert_allclose(ds.inverse_response, lut, rtol=1e-12, atol=1e-12)
     vmap = RadialVignette(-0.4).map(32, 48)
     np.testing.assert_allclose(ds.vignette, vmap / vmap.max(), atol=2e-5)  # 16-bit, max = 1
+
+
+def test_analog_gain_equals_longer_exposure(tmp_path: Path) -> None:
+    """Energy = gain * t * V * B (image_formation module doc): gain 2 at 5 ms gives the same
+    noise-free, blur-free frames as gain 1 at 10 ms; a bad gain is a one-line ConfigError."""
+    from amrvio.sim.simulate import SimConfig, simulate
+
+    base = dict(scene="room", motion="handheld", seconds=1.0, fps=4.0, width=48, height=32,
+                blur=False, sensor_noise=False, response_gamma=2.2)
+    simulate(SimConfig(**base, analog_gain=2.0, exposure_ms=5.0), tmp_path / "g2")  # type: ignore[arg-type]
+    simulate(SimConfig(**base, analog_gain=1.0, exposure_ms=10.0), tmp_path / "g1")  # type: ignore[arg-type]
+    a = sorted((tmp_path / "g2/mav0/cam0/data").iterdir())
+    b = sorted((tmp_path / "g1/mav0/cam0/data").iterdir())
+    assert len(a) == len(b) == 4
+    for pa, pb in zip(a, b, strict=True):
+        assert pa.name == pb.name and pa.read_bytes() == pb.read_bytes()
+    assert "analog_gain: 2.0" in (tmp_path / "g2/sim_config.yaml").read_text()
+    for bad in (0.0, float("nan"), 100.0):
+        with pytest.raises(ConfigError, match="analog gain"):
+            SimConfig(analog_gain=bad)
