@@ -51,6 +51,20 @@ def estimate_height(
                           int(res.inliers.sum()))
 
 
+def height_at_keyframe(frame_index: int, T_cam_world: F64, points_world: F64,
+                       camera_height_m: float, *, segment_scale: float = 1.0,
+                       seed: int = 0) -> HeightEstimate:
+    """The reading of one keyframe (pose 4x4 ``T_cam_world``) from the (N, 3) map points it
+    sees, in global units: a map segment whose unit is ``segment_scale`` global units."""
+    Pc = points_world @ T_cam_world[:3, :3].T + T_cam_world[:3, 3]
+    Pc = Pc[Pc[:, 2] > 0]
+    est = estimate_height(frame_index, Pc, camera_height_m, seed=seed)
+    if np.isfinite(est.scale):
+        est = HeightEstimate(est.frame_index, est.status, est.height_map * segment_scale,
+                             est.scale / segment_scale, est.n_inliers)
+    return est
+
+
 def smooth_scales(estimates: list[HeightEstimate], n_frames: int, half_window: int = 5) -> F64:
     """Per-frame scale (n_frames,): running median of the valid keyframe scales over
     ``2*half_window+1`` keyframes, linearly interpolated between keyframes, held at the ends.
@@ -65,4 +79,4 @@ def smooth_scales(estimates: list[HeightEstimate], n_frames: int, half_window: i
     return np.asarray(np.interp(np.arange(n_frames, dtype=float), idx, sm), dtype=np.float64)
 
 
-__all__ = ["HeightEstimate", "estimate_height", "smooth_scales"]
+__all__ = ["HeightEstimate", "estimate_height", "height_at_keyframe", "smooth_scales"]

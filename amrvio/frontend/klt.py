@@ -10,10 +10,12 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from amrvio.errors import ShapeError
 from amrvio.frontend.photometric_comp import (
     AffineBrightness,
     fit_affine_quantiles,
 )
+from amrvio.geometry._common import project
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
@@ -35,6 +37,7 @@ class KltConfig:
     border_px: int = 8
     photometric: bool = True
     ransac_thresh_px: float = 1.0
+    max_iterations: int = 30  # 15 measured: KITTI alike, sim corridor 0.13 -> 0.75 % ATE
     seed: int = 0
 
 
@@ -95,6 +98,33 @@ def detect_bucketed(
     return c[np.sort(sel)]
 
 
+def predict_tracks(K: F64, T_cam_world_pred: F64, R_cur_prev: F64, pts: F64,
+                   points_world: F64, has_point: NDArray[np.bool_],
+                   shape_hw: tuple[int, int]) -> F64:
+    """Motion prior for KLT: (N, 2) predicted positions of (N, 2) ``pts``. Tracks with a map
+    point (``has_point``, (N, 3) ``points_world``) are projected with the predicted pose; the
+    others follow the rotation-only homography K R K^-1 (H&Z 8.4.2). Clipped to the image."""
+    n = len(pts)
+    if pts.shape != (n, 2) or points_world.shape != (n, 3) or has_point.shape != (n,):
+        raise ShapeError("predict_tracks: pts (N, 2), points_world (N, 3), has_point (N,)")
+    pred = pts.copy()
+    if has_point.any():
+        uv, z = project(K, T_cam_world_pred, points_world[has_point])
+        ok = z > 0
+        sub = pred[has_point]
+        sub[ok] = uv[ok]
+        pred[has_point] = sub
+    rest = ~has_point
+    if rest.any():
+        Hm = K @ R_cur_prev @ np.linalg.inv(K)
+        ph = np.column_stack([pts[rest], np.ones(int(rest.sum()))]) @ Hm.T
+        pred[rest] = ph[:, :2] / ph[:, 2:3]
+    h, w = shape_hw
+    pred[:, 0] = np.clip(pred[:, 0], 0, w - 1)
+    pred[:, 1] = np.clip(pred[:, 1], 0, h - 1)
+    return pred
+
+
 class KltTracker:
     """Tracks points from one image to the next. Stateless between calls apart from config."""
 
@@ -122,7 +152,7 @@ class KltTracker:
         ref = img_prev if bright.is_identity() else bright.apply(img_prev)
         levels = cfg.wide_pyr_levels if wide else cfg.pyr_levels
         win = (cfg.win_size, cfg.win_size)
-        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, cfg.max_iterations, 0.01)
         p0 = pts_prev.astype(np.float32).reshape(-1, 1, 2)
         flags = 0
         if pts_pred is not None:
@@ -165,4 +195,4 @@ class KltTracker:
         return KltResult(p1f, ok, bright, n_fb, n_epi)
 
 
-__all__ = ["KltConfig", "KltResult", "KltTracker", "detect_bucketed"]
+__all__ = ["KltConfig", "KltResult", "KltTracker", "detect_bucketed", "predict_tracks"]

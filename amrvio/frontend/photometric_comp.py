@@ -33,8 +33,10 @@ class AffineBrightness:
         """Map a reference image into the brightness of the current one (uint8, clipped)."""
         if self.is_identity(1e-3, 0.5):
             return img
-        out = img.astype(np.float32) * np.float32(self.a) + np.float32(self.b)
-        return np.clip(out + 0.5, 0, 255).astype(np.uint8)
+        # a 256-entry lookup table: the same float32 arithmetic per grey level, once
+        lut = np.arange(256, dtype=np.float32) * np.float32(self.a) + np.float32(self.b)
+        table = np.clip(lut + np.float32(0.5), 0, 255).astype(np.uint8)
+        return np.asarray(table[img], dtype=np.uint8)
 
 
 def image_quantiles(img: NDArray[np.uint8], stride: int = 4) -> NDArray[np.float64]:

@@ -1,9 +1,16 @@
 """Monocular VO as a per-frame loop of stages: ``process(image, t_ns) -> FrameResult``.
 
-Stages: blur check -> KLT front-end (photometric compensation, FB check, essential-matrix
-rejection) -> two-view initialiser | PnP tracker (+ direct-alignment fallback) -> keyframe
-policy -> triangulation -> local BA (GTSAM) -> culling -> camera-height scale reading.
-``finish()`` composes the final trajectory from the BA-refined keyframes.
+Stages and where they live:
+- blur check (``diagnostics.blur``);
+- KLT front-end with photometric compensation, FB check and essential-matrix rejection,
+  motion prior ``predict_tracks`` (``frontend.klt``);
+- two-view initialiser (``geometry.two_view``) | PnP tracker (``geometry.pnp``), with the
+  direct-alignment prior and fallback (``frontend.direct``);
+- keyframe policy (``frontend.keyframe_policy``) and anchor re-tracking (``frontend.anchor``);
+- mapping: triangulation, local BA, culling, on the one map it owns (``estimator.mapper``);
+- camera-height scale readings (``estimator.camera_height``).
+This module keeps the track set and the segment bookkeeping, and wires the stages; ``finish()``
+composes the final trajectory from the BA-refined keyframes.
 """
 
 from __future__ import annotations
@@ -18,15 +25,19 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.diagnostics.blur import BlurScorer, BlurScorerConfig, var_laplacian
-from amrvio.estimator.camera_height import HeightEstimate, estimate_height, smooth_scales
-from amrvio.estimator.local_ba import BAProblem, solve_ba_gtsam, solve_ba_scipy
+from amrvio.estimator.camera_height import HeightEstimate, height_at_keyframe, smooth_scales
+from amrvio.estimator.mapper import Mapper, MapperConfig
 from amrvio.estimator.vo_map import VoMap
+from amrvio.frontend.anchor import AnchorConfig, AnchorImage, retrack_from_anchors
 from amrvio.frontend.direct import DirectConfig, align_direct
-from amrvio.frontend.klt import KltConfig, KltTracker, detect_bucketed
-from amrvio.frontend.photometric_comp import image_quantiles
-from amrvio.geometry._common import invert_T, pixels_to_normalized, project, se3_exp
+from amrvio.frontend.keyframe_policy import (
+    KeyframePolicyConfig,
+    KeyframeReason,
+    keyframe_decision,
+)
+from amrvio.frontend.klt import KltConfig, KltTracker, detect_bucketed, predict_tracks
+from amrvio.geometry._common import invert_T, project, se3_exp
 from amrvio.geometry.pnp import refine_pose_huber, solve_pnp
-from amrvio.geometry.triangulation import triangulate
 from amrvio.geometry.two_view import (
     TwoViewConfig,
     TwoViewResult,
@@ -51,7 +62,8 @@ class PoseStatus(Enum):
 
 @dataclass(frozen=True, slots=True)
 class VoConfig:
-    """All VO settings. ``ba_backend``: "gtsam" (measured faster, bench_vo) or "scipy"."""
+    """All VO settings (flat, so that ablations replace one field). ``ba_backend``: "gtsam"
+    (LM with SEQUENTIAL_CHOLESKY, chosen on measured speed: bench_ba_solvers) or "scipy"."""
 
     klt: KltConfig = field(default_factory=KltConfig)
     two_view: TwoViewConfig = field(default_factory=lambda: TwoViewConfig(min_parallax_deg=3.0))
@@ -61,7 +73,7 @@ class VoConfig:
     kf_min_track_ratio: float = 0.8
     kf_parallax_px: float = 25.0
     ba_window: int = 8
-    ba_fixed: int = 3
+    ba_fixed: int = 2  # 3 before: KITTI sweep median ATE 1.00 -> 0.81 m (bench_vo)
     ba_backend: str = "gtsam"
     ba_iterations: int = 8
     huber_px: float = 2.0
@@ -80,6 +92,18 @@ class VoConfig:
     camera_height_m: float | None = None
     scale_half_window: int = 10
     seed: int = 0
+
+    def mapper(self) -> MapperConfig:
+        return MapperConfig(self.ba_window, self.ba_fixed, self.ba_backend, self.ba_iterations,
+                            self.huber_px, self.cull_px, self.tri_min_parallax_deg,
+                            self.tri_max_reproj_px)
+
+    def keyframe_policy(self) -> KeyframePolicyConfig:
+        return KeyframePolicyConfig(self.kf_max_gap, self.kf_min_track_ratio,
+                                    self.kf_parallax_px)
+
+    def anchor(self) -> AnchorConfig:
+        return AnchorConfig(self.klt.win_size, self.anchor_max_shift_px, self.klt.photometric)
 
 
 @dataclass(frozen=True, slots=True)
@@ -130,11 +154,15 @@ class _FrameRec:
 
 @dataclass(slots=True)
 class _Segment:
-    map: VoMap
+    mapper: Mapper
     # Sim3 from segment world to global world: p_g = s R p + t
     R: F64
     t: F64
     s: float
+
+    @property
+    def map(self) -> VoMap:
+        return self.mapper.map
 
 
 class VoPipeline:
@@ -168,9 +196,8 @@ class VoPipeline:
         self.last_good_index = -1
         self.velocity: F64 = np.eye(4)  # per-frame motion T_k_k-1
         self.last_kf_frame = -1
-        self.kf_images: dict[tuple[int, int], U8] = {}
+        self.kf_images: dict[int, AnchorImage] = {}  # of the current segment, by kf id
         self.speed_hist: deque[float] = deque(maxlen=50)  # global units per frame
-        self.kf_quantiles: dict[tuple[int, int], F64] = {}
 
     # ------------------------------------------------------------------ helpers
     def _reset_init(self) -> None:
@@ -344,7 +371,8 @@ class VoPipeline:
             speed = float(np.median(moving)) if moving else 1.0
             s_g = max(speed * (index - self.init_ref_index), 1e-6)
             self.events.append((index, f"segment_scale_guess:{s_g:.4g}"))
-        self.segments.append(_Segment(VoMap(), R_g, t_g, s_g))
+        self.segments.append(_Segment(Mapper(self.K, self.cfg.mapper()), R_g, t_g, s_g))
+        self.kf_images = {}
         m = self.seg.map
         ref_mask = np.isin(self.init_ref_ids, self.ids)
         ref_ids = self.init_ref_ids[ref_mask]
@@ -363,7 +391,7 @@ class VoPipeline:
         # keep only tracks that were seen in the reference
         self._keep(cur_mask)
         kf1 = m.add_keyframe(index, T1, self.ids, self.pts)
-        self._local_ba()
+        self.seg.mapper.local_ba()
         T1 = m.keyframes[kf1.kf_id].T_cam_world
         self.initialised = True
         # poses of the frames between ref and now: PnP on their stored tracks
@@ -401,9 +429,7 @@ class VoPipeline:
         self._detect(img, kf1.kf_id)
         self._height_reading(kf1.kf_id)
         self._init_kf_obs_fix(kf1.kf_id)
-        self.kf_images[(len(self.segments) - 1, kf0.kf_id)] = self.init_ref_img
-        self.kf_quantiles[(len(self.segments) - 1, kf0.kf_id)] = image_quantiles(
-            self.init_ref_img)
+        self.kf_images[kf0.kf_id] = AnchorImage.of(self.init_ref_img)
         self._store_kf_image(kf1.kf_id, img)
         return self._record(index, t_ns, PoseStatus.TRACKED, T1, kf1.kf_id,
                             int(good.sum()), True, False, bscore, a, b,
@@ -434,21 +460,9 @@ class VoPipeline:
         # motion prior for KLT: project map points; rotation-only homography for the rest
         t0 = self._tic()
         has = m.points_of(self.ids)
-        pred = self.pts.copy()
-        if has.any():
-            uvp, z = project(self.K, T_pred, m.xyz[self.ids[has]])
-            okp = z > 0
-            sub = pred[has]
-            sub[okp] = uvp[okp]
-            pred[has] = sub
-        Rr = V[:3, :3]
-        Hm = self.K @ Rr @ np.linalg.inv(self.K)
-        if (~has).any():
-            ph = np.column_stack([self.pts[~has], np.ones(int((~has).sum()))]) @ Hm.T
-            pred[~has] = ph[:, :2] / ph[:, 2:3]
-        h, w = img.shape
-        pred[:, 0] = np.clip(pred[:, 0], 0, w - 1)
-        pred[:, 1] = np.clip(pred[:, 1], 0, h - 1)
+        xyz = np.zeros((len(self.ids), 3))
+        xyz[has] = m.xyz[self.ids[has]]
+        pred = predict_tracks(self.K, T_pred, V[:3, :3], self.pts, xyz, has, img.shape)
         self._toc("predict", t0)
         t0 = self._tic()
         res = self.klt.track(self.prev_img, img, self.pts, pts_pred=pred, wide=self.gap > 0,
@@ -550,79 +564,25 @@ class VoPipeline:
     def _need_keyframe(self, index: int, n_inl: int) -> bool:
         m = self.seg.map
         kf = m.keyframes[-1]
-        n_kf_pts = int(m.points_of(kf.track_ids).sum())
-        if index - kf.frame_index >= self.cfg.kf_max_gap:
-            return True
-        if n_inl < self.cfg.kf_min_track_ratio * n_kf_pts:
-            return True
-        common, ia, ib = np.intersect1d(kf.track_ids, self.ids, return_indices=True)
-        if len(common) < 20:
-            return True
-        par = float(np.median(np.linalg.norm(kf.uv[ia] - self.pts[ib], axis=1)))
-        return par > self.cfg.kf_parallax_px
-
-    def _refine_against_anchor(self, img: U8) -> None:
-        """Re-track each track from its first keyframe image (removes accumulated KLT drift);
-        tracks whose anchored position disagrees by more than ``anchor_max_shift_px`` go."""
-        import cv2
-
-        from amrvio.frontend.photometric_comp import affine_from_quantiles
-
-        t0 = self._tic()
-        seg_id = len(self.segments) - 1
-        drop = np.zeros(len(self.ids), dtype=bool)
-        win = (self.cfg.klt.win_size, self.cfg.klt.win_size)
-        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 0.01)
-        q_cur = image_quantiles(img)
-        for fk in np.unique(self.first_kf[self.first_kf >= 0]):
-            ref = self.kf_images.get((seg_id, int(fk)))
-            if ref is None:
-                continue
-            sel = np.flatnonzero(self.first_kf == fk)
-            bright = (affine_from_quantiles(self.kf_quantiles[(seg_id, int(fk))], q_cur)
-                      if self.cfg.klt.photometric else None)
-            if bright is not None and not bright.is_identity():
-                ref = bright.apply(ref)
-            p0 = self.first_uv[sel].astype(np.float32).reshape(-1, 1, 2)
-            p1 = self.pts[sel].astype(np.float32).reshape(-1, 1, 2).copy()
-            p1, st, _ = cv2.calcOpticalFlowPyrLK(ref, img, p0, p1, winSize=win,
-                                                 maxLevel=1, criteria=crit,
-                                                 flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
-            p1 = p1.reshape(-1, 2).astype(np.float64)
-            shift = np.linalg.norm(p1 - self.pts[sel], axis=1)
-            ok = (st.ravel() == 1) & (shift < self.cfg.anchor_max_shift_px)
-            self.pts[sel[ok]] = p1[ok]
-            drop[sel[~ok & (st.ravel() == 1)]] = True
-        self._keep(~drop)
-        self._toc("anchor", t0)
+        reason = keyframe_decision(self.cfg.keyframe_policy(), index - kf.frame_index, n_inl,
+                                   int(m.points_of(kf.track_ids).sum()), kf.track_ids, kf.uv,
+                                   self.ids, self.pts)
+        return reason is not KeyframeReason.NONE
 
     def _make_keyframe(self, index: int, T_cw: F64, img: U8) -> F64:
-        cfg = self.cfg
-        m = self.seg.map
-        if cfg.anchor_refine:
-            self._refine_against_anchor(img)
+        mapper = self.seg.mapper
+        m = mapper.map
+        if self.cfg.anchor_refine:
+            t0 = self._tic()
+            self.pts, drop = retrack_from_anchors(img, self.pts, self.first_kf, self.first_uv,
+                                                  self.kf_images, self.cfg.anchor())
+            self._keep(~drop)
+            self._toc("anchor", t0)
         kf = m.add_keyframe(index, T_cw, self.ids, self.pts)
         # triangulate tracks seen in an earlier keyframe and without a point yet
-        t0 = self._tic()
-        m.ensure_capacity(self._next_id)
-        has = m.points_of(self.ids)
-        cand = np.flatnonzero(~has & (self.first_kf >= 0) & (self.first_kf < kf.kf_id))
-        if len(cand):
-            focal = 0.5 * (self.K[0, 0] + self.K[1, 1])
-            xn2 = pixels_to_normalized(self.pts[cand], self.K)
-            xn1 = pixels_to_normalized(self.first_uv[cand], self.K)
-            X = np.zeros((len(cand), 3))
-            valid = np.zeros(len(cand), dtype=bool)
-            for fk in np.unique(self.first_kf[cand]):
-                sel = self.first_kf[cand] == fk
-                tri = triangulate(m.keyframes[int(fk)].T_cam_world, T_cw, xn1[sel], xn2[sel],
-                                  min_parallax_deg=cfg.tri_min_parallax_deg,
-                                  max_reproj_px=cfg.tri_max_reproj_px, focal_px=focal)
-                X[sel] = tri.points_world
-                valid[sel] = tri.valid
-            m.set_points(self.ids[cand[valid]], X[valid])
-        self._toc("triangulate", t0)
-        self._local_ba()
+        mapper.triangulate_new(kf.kf_id, self.ids, self.first_kf, self.first_uv, self.pts,
+                               self._next_id)
+        mapper.local_ba()
         T_cw = m.keyframes[kf.kf_id].T_cam_world.copy()
         self.T_last = T_cw
         # tracks without a first keyframe start here
@@ -637,67 +597,12 @@ class VoPipeline:
         return T_cw
 
     def _store_kf_image(self, kf_id: int, img: U8) -> None:
-        seg_id = len(self.segments) - 1
-        self.kf_images[(seg_id, kf_id)] = img
-        self.kf_quantiles[(seg_id, kf_id)] = image_quantiles(img)
-        used = {(seg_id, int(k)) for k in np.unique(self.first_kf)}
+        """Keep the keyframe images that some current track is anchored in."""
+        self.kf_images[kf_id] = AnchorImage.of(img)
+        used = {int(k) for k in np.unique(self.first_kf)}
         for key in list(self.kf_images):
             if key not in used:
                 del self.kf_images[key]
-                del self.kf_quantiles[key]
-
-    # ------------------------------------------------------------------ mapping
-    def _local_ba(self) -> None:
-        cfg = self.cfg
-        m = self.seg.map
-        t0 = self._tic()
-        win = m.keyframes[-(cfg.ba_window + cfg.ba_fixed):]
-        ids_all = np.concatenate([k.track_ids for k in win])
-        cams = np.concatenate([np.full(len(k.track_ids), i) for i, k in enumerate(win)])
-        uvs = np.vstack([k.uv for k in win])
-        has = m.points_of(ids_all)
-        ids_all, cams, uvs = ids_all[has], cams[has], uvs[has]
-        uniq, inv, counts = np.unique(ids_all, return_inverse=True, return_counts=True)
-        good = counts[inv] >= 2
-        ids_all, cams, uvs, inv = ids_all[good], cams[good], uvs[good], inv[good]
-        uniq2, inv2 = np.unique(ids_all, return_inverse=True)
-        if len(uniq2) < 10:
-            self._toc("ba", t0)
-            return
-        # gauge (7 DoF): hold the older keyframes fixed, at least two of them
-        fixed_all = np.zeros(len(win), dtype=bool)
-        fixed_all[: max(2, len(win) - cfg.ba_window)] = True
-        # keyframes without an observation in this window stay out of the problem
-        used, cams = np.unique(cams, return_inverse=True)
-        win = [win[int(i)] for i in used]
-        fixed = fixed_all[used]
-        if int(fixed.sum()) < 2:
-            fixed[:2] = True
-        if len(win) < 2:
-            self._toc("ba", t0)
-            return
-        T = np.stack([k.T_cam_world for k in win])
-        prob = BAProblem(T, fixed, m.xyz[uniq2].copy(), cams.astype(np.int64),
-                         inv2.astype(np.int64), uvs, self.K, cfg.huber_px)
-        solver = solve_ba_gtsam if cfg.ba_backend == "gtsam" else solve_ba_scipy
-        try:
-            out = solver(prob, cfg.ba_iterations)
-        except RuntimeError as err:  # gtsam: indeterminant system etc.
-            log.warning("local BA failed: %s", err)
-            self._toc("ba", t0)
-            return
-        for i, k in enumerate(win):
-            m.set_pose(k.kf_id, out.T_cam_world[i])
-        m.xyz[uniq2] = out.points
-        self._toc("ba", t0)
-        # culling: points with a large residual or behind a camera
-        t0 = self._tic()
-        pc_z = np.einsum("mj,mj->m", out.T_cam_world[cams, 2, :3], out.points[inv2]) + \
-            out.T_cam_world[cams, 2, 3]
-        bad_obs = (out.residual_px > cfg.cull_px) | (pc_z <= 0)
-        bad_pts = np.unique(inv2[bad_obs])
-        m.remove_points(uniq2[bad_pts])
-        self._toc("cull", t0)
 
     def _height_reading(self, kf_id: int) -> None:
         if self.cfg.camera_height_m is None:
@@ -706,15 +611,9 @@ class VoPipeline:
         m = self.seg.map
         kf = m.keyframes[kf_id]
         has = m.points_of(kf.track_ids)
-        P = m.xyz[kf.track_ids[has]]
-        Pc = P @ kf.T_cam_world[:3, :3].T + kf.T_cam_world[:3, 3]
-        Pc = Pc[Pc[:, 2] > 0]
-        est = estimate_height(kf.frame_index, Pc, self.cfg.camera_height_m, seed=self.cfg.seed)
-        if np.isfinite(est.scale):
-            # express in global units: the segment's own scale multiplies map units
-            est = HeightEstimate(est.frame_index, est.status, est.height_map * self.seg.s,
-                                 est.scale / self.seg.s, est.n_inliers)
-        self.heights.append(est)
+        self.heights.append(height_at_keyframe(
+            kf.frame_index, kf.T_cam_world, m.xyz[kf.track_ids[has]], self.cfg.camera_height_m,
+            segment_scale=self.seg.s, seed=self.cfg.seed))
         self._toc("scale", t0)
 
     # ------------------------------------------------------------------ output
@@ -731,6 +630,13 @@ class VoPipeline:
         if not np.all(np.isfinite(T)) or float(np.median(err)) > self.cfg.pnp_thresh_px:
             return T_cw
         return T
+
+    def _all_timings(self) -> dict[str, float]:
+        out = dict(self.timings)
+        for sg in self.segments:
+            for k, v in sg.mapper.timings.items():
+                out[k] = out.get(k, 0.0) + v
+        return out
 
     def finish(self) -> VoOutput:
         """Compose final poses from the refined keyframes; fill interpolated/lost frames."""
@@ -790,7 +696,7 @@ class VoPipeline:
         kf_idx = np.array([i for i, f in enumerate(frames) if f.is_keyframe], dtype=np.int64)
         return VoOutput(np.array(self.stamps, dtype=np.int64), T_wc, frames, kf_idx,
                         np.vstack(pts) if pts else np.zeros((0, 3)), list(self.heights),
-                        frame_scale, list(self.events), dict(self.timings))
+                        frame_scale, list(self.events), self._all_timings())
 
 
 def _fill_interpolated(T_wc: F64, statuses: list[PoseStatus], anchor: NDArray[np.intp]) -> F64:
