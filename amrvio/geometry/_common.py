@@ -6,6 +6,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
+from amrvio.types.lie import SE3, hat, so3_exp
 
 F64 = NDArray[np.float64]
 
@@ -74,27 +75,15 @@ def invert_T(T: F64) -> F64:
 
 
 def skew(v: F64) -> F64:
-    """3x3 cross-product matrix of a 3-vector."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    """3x3 cross-product matrix of a 3-vector (amrvio.types.lie.hat)."""
+    return hat(v)
 
 
 def so3_exp_small(w: F64) -> F64:
-    """Rodrigues' formula, exact for small angles (Taylor branch)."""
-    th = float(np.linalg.norm(w))
-    W = skew(w)
-    if th < 1e-8:
-        return np.eye(3) + W + 0.5 * W @ W
-    return np.eye(3) + np.sin(th) / th * W + (1 - np.cos(th)) / th**2 * W @ W
+    """Rotation matrix of a rotation vector; exact for tiny angles (amrvio.types.lie.so3_exp)."""
+    return so3_exp(np.asarray(w, dtype=np.float64))
 
 
 def se3_exp(xi: F64) -> F64:
-    """SE(3) exponential of xi = [rho, phi] -> 4x4 (first-order V for tiny phi)."""
-    rho, phi = xi[:3], xi[3:]
-    R = so3_exp_small(phi)
-    th = float(np.linalg.norm(phi))
-    W = skew(phi)
-    if th < 1e-8:
-        V = np.eye(3) + 0.5 * W
-    else:
-        V = np.eye(3) + (1 - np.cos(th)) / th**2 * W + (th - np.sin(th)) / th**3 * W @ W
-    return rt_to_T(R, V @ rho)
+    """4x4 SE(3) exponential of xi = [rho, phi] (amrvio.types.lie.SE3.exp)."""
+    return SE3.exp(xi).matrix()
