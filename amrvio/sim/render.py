@@ -28,25 +28,13 @@ from numpy.typing import NDArray
 from amrvio.errors import ShapeError
 from amrvio.sim.scene import Scene
 from amrvio.sim.textures import MipTexture
-from amrvio.types.camera import CameraModel
+from amrvio.types.camera import CameraModel, PinholeCamera
 from amrvio.types.lie import SE3
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
 
 _PARAM_EPS = 1e-6  # overlap of sibling pieces (fraction of the quad) so that no pixel is missed
-
-
-@dataclass(frozen=True, slots=True)
-class _Canvas:
-    """Ideal pinhole image the scene is rasterised on."""
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,8 +98,7 @@ class SceneRenderer:
         self._remap: tuple[NDArray[np.int16], NDArray[np.uint16]] | None = None
         self._remap_near: tuple[F32, F32] | None = None
         if camera.distortion_model == "none":
-            self._canvas = _Canvas(camera.width, camera.height, camera.fx, camera.fy, camera.cx,
-                                   camera.cy)
+            self._canvas: CameraModel = camera.pinhole()
         else:
             self._canvas = self._distorted_canvas(camera)
             us, vs = np.meshgrid(np.arange(camera.width, dtype=np.float64),
@@ -128,9 +115,7 @@ class SceneRenderer:
         self._base = self._canvas
         ss = self.supersample
         if ss > 1:  # pixel centres: u_fine = ss (u + 0.5) - 0.5
-            bc = self._base
-            self._canvas = _Canvas(bc.width * ss, bc.height * ss, bc.fx * ss, bc.fy * ss,
-                                   (bc.cx + 0.5) * ss - 0.5, (bc.cy + 0.5) * ss - 0.5)
+            self._canvas = self._base.scaled(ss)
 
         self._zbuf = np.zeros((self._canvas.height, self._canvas.width), np.float32)
         self._img = np.zeros((self._canvas.height, self._canvas.width), np.float32)
@@ -182,7 +167,7 @@ class SceneRenderer:
     # ----- internals --------------------------------------------------------------------------------
 
     @staticmethod
-    def _distorted_canvas(camera: CameraModel) -> _Canvas:
+    def _distorted_canvas(camera: CameraModel) -> PinholeCamera:
         """Smallest ideal pinhole canvas (same fx, fy) covering the distorted image's field of view."""
         w, h = camera.width, camera.height
         border = np.concatenate([
@@ -199,7 +184,7 @@ class SceneRenderer:
         hi = np.minimum(hi, [2.5 * w, 2.5 * h])
         u0, v0 = math.floor(lo[0]), math.floor(lo[1])
         cw, ch = math.ceil(hi[0]) - u0 + 1, math.ceil(hi[1]) - v0 + 1
-        return _Canvas(int(cw), int(ch), camera.fx, camera.fy, camera.cx - u0, camera.cy - v0)
+        return PinholeCamera(int(cw), int(ch), camera.fx, camera.fy, camera.cx - u0, camera.cy - v0)
 
     def _finish_depth(self, inv_depth: F32) -> F32:
         import cv2
@@ -442,7 +427,7 @@ def _piece_corners(Cc: F64, q: NDArray[np.intp], prm: F64) -> F64:
     return np.asarray(C0[:, None, :] + a[..., None] * A[:, None, :] + b[..., None] * B[:, None, :])
 
 
-def _all_outside(Cc: F64, cv: _Canvas, near: float) -> NDArray[np.bool_]:
+def _all_outside(Cc: F64, cv: CameraModel, near: float) -> NDArray[np.bool_]:
     """(Q,) True where all 4 corners of a (Q, 4, 3) camera-frame quad are outside one frustum plane.
 
     Side planes pass through the optical centre: u >= -0.5 <=> fx x + (cx + 0.5) z >= 0, etc."""
