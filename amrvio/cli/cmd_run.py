@@ -5,25 +5,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from amrvio.cli.args import positive_float
+
 NAME = "run"
 HELP = "run monocular visual odometry on a dataset and write trajectory, keyframes, map, status"
-
-
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return v
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("dataset", help="dataset folder or KIND:PATH (kitti:, euroc:, ...)")
     parser.add_argument("--out", type=Path, required=True, help="output folder")
     parser.add_argument("--calib", type=Path, default=None, help="override the calibration file")
-    parser.add_argument("--camera-height", type=_positive_float, default=None, metavar="H",
+    parser.add_argument("--camera-height", type=positive_float, default=None, metavar="H",
                         help="camera height above the ground (m): metric scale from the ground "
                              "plane")
     parser.add_argument("--max-frames", type=int, default=None, help="use the first N frames")
