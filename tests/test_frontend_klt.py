@@ -11,8 +11,8 @@ from amrvio.frontend.klt import KltConfig, KltTracker, detect_bucketed
 from amrvio.frontend.photometric_comp import (
     AffineBrightness,
     fit_affine_quantiles,
-    fit_affine_samples,
 )
+from amrvio.photometric.affine import fit_affine_robust
 
 
 def _img() -> np.ndarray:
@@ -63,7 +63,7 @@ def test_affine_fits_recover_gain_and_offset() -> None:
     img2 = AffineBrightness(a, b).apply(img)
     q = fit_affine_quantiles(img, img2)
     assert abs(q.a - a) < 0.02 and abs(q.b - b) < 2.0
-    s = fit_affine_samples(img.ravel()[::7], img2.ravel()[::7])
+    s = fit_affine_robust(img.ravel()[::7], img2.ravel()[::7])
     assert abs(s.a - a) < 0.01 and abs(s.b - b) < 1.0
 
 

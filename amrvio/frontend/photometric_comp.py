@@ -2,8 +2,7 @@
 
 Used before KLT so that exposure jumps do not break tracks. The fit is robust and cheap: it
 matches robust quantiles of the two images (the same scene under a gain/offset change maps
-quantiles affinely), or, when point correspondences are known, does a Huber-weighted
-least-squares fit of patch means (closed form when the warp is fixed, seed §6.2).
+quantiles affinely). With known correspondences, use amrvio.photometric.affine.fit_affine_robust.
 """
 
 from __future__ import annotations
@@ -11,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
 
@@ -66,31 +65,4 @@ def affine_from_quantiles(qr: NDArray[np.float64], qc: NDArray[np.float64]) -> A
     return AffineBrightness(float(a), float(b))
 
 
-def fit_affine_samples(
-    i_ref: ArrayLike, i_cur: ArrayLike, *, huber: float = 10.0,
-    iterations: int = 5,
-) -> AffineBrightness:
-    """Huber-IRLS fit of ``i_cur ~ a i_ref + b`` over (N,) corresponding intensity samples."""
-    x = np.asarray(i_ref, dtype=np.float64).ravel()
-    y = np.asarray(i_cur, dtype=np.float64).ravel()
-    if x.shape != y.shape:
-        raise ShapeError(f"sample arrays differ in shape: {x.shape} vs {y.shape}")
-    ok = (x > 2) & (x < 253) & (y > 2) & (y < 253)
-    x, y = x[ok], y[ok]
-    if len(x) < 10 or np.ptp(x) < 1.0:
-        return AffineBrightness()
-    w = np.ones_like(x)
-    a, b = 1.0, 0.0
-    for _ in range(iterations):
-        A = np.column_stack([x, np.ones_like(x)]) * np.sqrt(w)[:, None]
-        sol, *_ = np.linalg.lstsq(A, y * np.sqrt(w), rcond=None)
-        a, b = float(sol[0]), float(sol[1])
-        r = np.abs(y - (a * x + b))
-        w = np.where(r <= huber, 1.0, huber / np.maximum(r, 1e-12))
-    if a <= 0.05:
-        return AffineBrightness()
-    return AffineBrightness(a, b)
-
-
-__all__ = ["AffineBrightness", "affine_from_quantiles", "fit_affine_quantiles",
-           "fit_affine_samples", "image_quantiles"]
+__all__ = ["AffineBrightness", "affine_from_quantiles", "fit_affine_quantiles", "image_quantiles"]
