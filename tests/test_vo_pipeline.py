@@ -9,7 +9,9 @@ import pytest
 from skimage import data as skdata
 
 from amrvio.geometry._common import invert_T, rt_to_T, so3_exp_small
-from amrvio.pipeline.vo import PoseStatus, VoConfig, VoPipeline
+from amrvio.config import PipelineConfig
+from amrvio.pipeline.pipeline import Pipeline
+from amrvio.pipeline.records import PoseStatus
 
 W, H = 320, 240
 K = np.array([[260.0, 0, 159.5], [0, 260.0, 119.5], [0, 0, 1]])
@@ -64,12 +66,12 @@ def seq() -> tuple[list[np.ndarray], np.ndarray]:
 
 
 def _run(imgs: list[np.ndarray]) -> np.ndarray:
-    cfg = VoConfig()
-    vo = VoPipeline(K, cfg)
+    cfg = PipelineConfig()
+    vo = Pipeline(K, cfg)
     for i, im in enumerate(imgs):
         vo.process(im, i * 50_000_000)
     out = vo.finish()
-    assert all(f.status is not PoseStatus.LOST for f in out.frames)
+    assert all(f.status is not PoseStatus.LOST for f in out.records)
     return out.T_world_cam
 
 
@@ -106,12 +108,12 @@ def test_vo_is_deterministic(seq: tuple[list[np.ndarray], np.ndarray]) -> None:
 def test_vo_static_camera_reports_lost_not_nan() -> None:
     tex = _world_texture()
     img = _render_box(np.eye(4), tex)
-    vo = VoPipeline(K)
+    vo = Pipeline(K)
     for i in range(5):
         r = vo.process(img, i * 50_000_000)
-        assert np.all(np.isfinite(r.T_world_cam))
+        assert r.pose_online is not None and np.all(np.isfinite(r.pose_online.matrix()))
     out = vo.finish()
-    assert all(f.status is PoseStatus.LOST for f in out.frames)
+    assert all(f.status is PoseStatus.LOST for f in out.records)
     assert np.all(np.isfinite(out.T_world_cam))
 
 
@@ -124,15 +126,17 @@ def test_vo_blurred_frames_are_not_keyframes_and_exposure_step_keeps_tracking(
         imgs[k] = cv2.GaussianBlur(imgs[k], (0, 0), 4.0)
     for k in range(28, len(imgs)):  # exposure step: +0.7 EV, gain and offset
         imgs[k] = np.clip(1.6 * imgs[k].astype(np.float64) - 20, 0, 255).astype(np.uint8)
-    vo = VoPipeline(K)
+    vo = Pipeline(K)
     results = [vo.process(im, i * 50_000_000) for i, im in enumerate(imgs)]
     for k in blurred:
         assert results[k].blurred
         assert not results[k].is_keyframe
     out = vo.finish()
-    assert all(f.status is PoseStatus.TRACKED for f in out.frames[5:])
-    assert not any(e.startswith("lost") for _, e in out.events)
-    assert abs(out.frames[30].brightness_a - 1.0) < 0.05  # after the step: back to ~1
-    assert abs(results[28].brightness_a - 1.6) < 0.1
+    assert all(f.status is PoseStatus.TRACKED for f in out.records[5:])
+    assert not any(e.startswith("lost") for r in out.records for e in r.events)
+    tr30, tr28 = out.records[30].tracking, results[28].tracking
+    assert tr30 is not None and tr28 is not None
+    assert abs(tr30.brightness_a - 1.0) < 0.05  # after the step: back to ~1
+    assert abs(tr28.brightness_a - 1.6) < 0.1
     path = float(np.sum(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1)))
     assert _sim3_ate(out.T_world_cam[:, :3, 3], gt[:, :3, 3]) < 0.01 * path

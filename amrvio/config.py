@@ -1,0 +1,295 @@
+"""The pipeline's configuration: a tree of frozen dataclasses, each stage owning its defaults.
+
+YAML files use exactly the field names, nested as the tree is (``tracking: {klt: {max_features:
+1200}}``). An unknown key or a value of the wrong type is a :class:`ConfigError` naming the key.
+There is one seed, at the top: stages that draw random numbers get it at construction, so the
+stage configs' own ``seed`` fields are not settable from a file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from amrvio.diagnostics.blur import BlurScorerConfig
+from amrvio.errors import ConfigError
+from amrvio.estimator.initializer import InitConfig
+from amrvio.estimator.local_mapping import MappingConfig
+from amrvio.estimator.scale_sources import ScaleConfig
+from amrvio.frontend.tracker import TrackingConfig
+
+#: nested fields that the top-level ``seed`` replaces
+_SEED = "seed"
+
+
+@dataclass(frozen=True, slots=True)
+class OutputConfig:
+    """``final_refine``: refine non-keyframe poses against the final map (motion-only, Huber)."""
+
+    final_refine: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class PipelineConfig:
+    """The whole per-frame pipeline."""
+
+    seed: int = 0
+    track: bool = True
+    blur_gating: bool = True
+    blur: BlurScorerConfig = field(default_factory=lambda: BlurScorerConfig(window=10, reset_after=10))
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    init: InitConfig = field(default_factory=InitConfig)
+    mapping: MappingConfig = field(default_factory=MappingConfig)
+    scale: ScaleConfig = field(default_factory=ScaleConfig)
+    output: OutputConfig = field(default_factory=OutputConfig)
+
+
+#: one line of help per field, by dotted path; `amrvio config --dump` prints them as comments
+HELP: dict[str, str] = {
+    "seed": "seed of every random choice (RANSAC, sampling): same input and seed, same output",
+    "track": "run tracking (false: diagnostics only, as `amrvio diagnose`)",
+    "blur_gating": "blurred frames give a pose but make no keyframe and no track update",
+    "blur": "blur score normalised by recent sharp frames",
+    "blur.window": "recent sharp scores in the running median",
+    "blur.blur_ratio": "a frame whose score / median is below this is blurred",
+    "blur.sharp_ratio": "frames at or above this ratio join the sharp reference",
+    "blur.reset_after": "consecutive non-sharp frames after which the reference restarts",
+    "tracking": "KLT front-end, PnP, direct alignment",
+    "tracking.klt": "corner detection and pyramidal KLT",
+    "tracking.klt.max_features": "tracks kept alive (topped up at keyframes)",
+    "tracking.klt.grid_rows": "detection buckets, rows",
+    "tracking.klt.grid_cols": "detection buckets, columns",
+    "tracking.klt.min_distance_px": "minimum distance between corners (px)",
+    "tracking.klt.quality_level": "Shi-Tomasi quality level relative to the best corner",
+    "tracking.klt.win_size": "KLT window (px)",
+    "tracking.klt.pyr_levels": "pyramid levels between consecutive frames",
+    "tracking.klt.wide_pyr_levels": "pyramid levels after a gap (blur)",
+    "tracking.klt.fb_thresh_px": "forward-backward check threshold (px)",
+    "tracking.klt.border_px": "image border without corners (px)",
+    "tracking.klt.photometric": "affine brightness compensation before KLT",
+    "tracking.klt.ransac_thresh_px": "essential-matrix outlier threshold (px)",
+    "tracking.klt.max_iterations": "KLT iterations per level",
+    "tracking.direct": "sparse direct alignment, SE(3) + affine brightness",
+    "tracking.direct.levels": "pyramid levels",
+    "tracking.direct.iterations": "Gauss-Newton iterations per level",
+    "tracking.direct.huber": "Huber threshold (grey levels)",
+    "tracking.direct.min_pixels": "fewest map points to try it",
+    "tracking.direct.max_rms": "largest accepted photometric RMS (grey levels)",
+    "tracking.direct.estimate_affine": "estimate gain/offset (false: brightness constancy)",
+    "tracking.direct_prior": "direct alignment gives the motion prior after blurred frames",
+    "tracking.direct_fallback": "direct alignment poses the frame when PnP fails",
+    "tracking.min_pnp_inliers": "PnP inliers needed to accept a pose",
+    "tracking.pnp_thresh_px": "PnP RANSAC threshold (px)",
+    "tracking.huber_px": "Huber threshold of pose refinement and BA (px)",
+    "init": "two-view initialisation",
+    "init.two_view": "gates of the two-view geometry",
+    "init.two_view.min_points": "tracks shared with the reference needed to try",
+    "init.two_view.min_inliers": "essential-matrix inliers needed",
+    "init.two_view.min_flow_px": "median flow needed (px)",
+    "init.two_view.min_parallax_deg": "median rotation-compensated parallax needed (deg)",
+    "init.two_view.min_point_parallax_deg": "parallax a triangulated point needs (deg)",
+    "init.two_view.ransac_thresh_px": "essential-matrix RANSAC threshold (px)",
+    "init.two_view.max_reproj_px": "largest reprojection error of a triangulated point (px)",
+    "init.two_view.min_triangulated": "triangulated points needed",
+    "init.max_frames": "frames after which the reference image is replaced",
+    "init.static_flow_px": "median flow under which the camera counts as at rest (px)",
+    "init.min_pnp_inliers": "PnP inliers to pose a frame between the two views",
+    "init.pnp_thresh_px": "PnP RANSAC threshold for those frames (px)",
+    "mapping": "keyframes, triangulation and local bundle adjustment",
+    "mapping.keyframes": "keyframe policy",
+    "mapping.keyframes.max_gap": "frames at most between keyframes",
+    "mapping.keyframes.min_track_ratio": "share of the last keyframe's points still tracked",
+    "mapping.keyframes.parallax_px": "median parallax of the common tracks that makes a keyframe (px)",
+    "mapping.keyframes.min_common": "fewest tracks shared with the last keyframe",
+    "mapping.anchor_refine": "re-track keyframe points from the image where they started",
+    "mapping.anchor": "anchor re-tracking",
+    "mapping.anchor.win_size": "LK window (px)",
+    "mapping.anchor.max_shift_px": "largest accepted disagreement with the frame-to-frame track (px)",
+    "mapping.anchor.photometric": "compensate the brightness change first",
+    "mapping.mapper": "triangulation and local BA",
+    "mapping.mapper.ba_window": "keyframes optimised by the local BA",
+    "mapping.mapper.ba_fixed": "older keyframes held fixed (gauge)",
+    "mapping.mapper.ba_backend": "gtsam (LM, SEQUENTIAL_CHOLESKY) or scipy",
+    "mapping.mapper.ba_iterations": "LM iterations",
+    "mapping.mapper.huber_px": "Huber threshold of the BA (px)",
+    "mapping.mapper.cull_px": "points with a larger residual are removed after BA (px)",
+    "mapping.mapper.tri_min_parallax_deg": "parallax a new point needs (deg)",
+    "mapping.mapper.tri_max_reproj_px": "largest reprojection error of a new point (px)",
+    "scale": "metric scale sources",
+    "scale.camera_height_m": "camera height above a flat floor (m); null when unknown",
+    "scale.half_window": "keyframes on each side of the running median of scale readings",
+    "output": "what is written",
+    "output.final_refine": "refine non-keyframe poses against the final map",
+}
+
+
+def _fields(cls: type) -> dict[str, tuple[Any, Any]]:
+    """name -> (resolved type, default) of a config dataclass, the nested seeds left out."""
+    hints = typing.get_type_hints(cls)
+    out: dict[str, tuple[Any, Any]] = {}
+    for f in dataclasses.fields(cls):
+        if f.name == _SEED and cls is not PipelineConfig:
+            continue
+        default = f.default if f.default is not dataclasses.MISSING else (
+            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
+        out[f.name] = (hints[f.name], default)
+    return out
+
+
+def _is_config(tp: Any) -> bool:
+    return isinstance(tp, type) and dataclasses.is_dataclass(tp)
+
+
+def _check_value(key: str, tp: Any, value: Any, where: str) -> Any:
+    """``value`` converted to ``tp`` or a ConfigError naming the key."""
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        inner = [a for a in args if a is not type(None)]
+        if len(inner) == 1:
+            return _check_value(key, inner[0], value, where)
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        try:
+            return tp(value)
+        except ValueError:
+            allowed = ", ".join(str(m.value) for m in tp)
+            raise ConfigError(f"{where}: key '{key}' must be one of {allowed}, got {value!r}") from None
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: key '{key}' must be true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where}: key '{key}' must be an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{where}: key '{key}' must be a number, got {value!r}")
+        if value != value or value in (float("inf"), float("-inf")):
+            raise ConfigError(f"{where}: key '{key}' must be finite, got {value!r}")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where}: key '{key}' must be a string, got {value!r}")
+        return value
+    raise ConfigError(f"{where}: key '{key}' has a type ({tp}) that files cannot set")
+
+
+def _build(base: Any, data: dict[str, Any], where: str, prefix: str = "") -> Any:
+    """``base`` (a config instance) with the keys of ``data`` replaced, recursively."""
+    known = _fields(type(base))
+    changes: dict[str, Any] = {}
+    for k, v in data.items():
+        key = f"{prefix}{k}"
+        if not isinstance(k, str) or k not in known:
+            hint = " (there is one seed, at the top level)" if k == _SEED else ""
+            raise ConfigError(f"{where}: unknown key '{key}'{hint}")
+        tp = known[k][0]
+        if _is_config(tp):
+            if not isinstance(v, dict):
+                raise ConfigError(f"{where}: key '{key}' must be a mapping of its fields, got {v!r}")
+            changes[k] = _build(getattr(base, k), v, where, key + ".")
+        else:
+            changes[k] = _check_value(key, tp, v, where)
+    try:
+        return dataclasses.replace(base, **changes)
+    except (ValueError, TypeError) as err:
+        raise ConfigError(f"{where}: {prefix.rstrip('.') or 'config'}: {err}") from None
+
+
+def config_from_dict(data: dict[str, Any], where: str = "config") -> PipelineConfig:
+    """A PipelineConfig from a (YAML-shaped) mapping; ``where`` names the source in errors."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where}: the file must hold a mapping of config keys")
+    cfg = _build(PipelineConfig(), data, where)
+    if not isinstance(cfg, PipelineConfig):
+        raise ConfigError(f"{where}: not a pipeline configuration")
+    return cfg
+
+
+def load_config(path: Path) -> PipelineConfig:
+    """Read a YAML config file (keys = field names; absent keys keep their defaults)."""
+    import yaml
+
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot read the config file ({err.strerror})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        line = f" line {mark.line + 1}" if mark is not None else ""
+        raise ConfigError(f"{path}:{line} not valid YAML") from None
+    return config_from_dict({} if data is None else data, str(path))
+
+
+def config_to_dict(cfg: Any) -> dict[str, Any]:
+    """The tree as plain values (enums by value), nested seeds left out."""
+    out: dict[str, Any] = {}
+    for name in _fields(type(cfg)):
+        v = getattr(cfg, name)
+        if _is_config(type(v)):
+            out[name] = config_to_dict(v)
+        elif isinstance(v, enum.Enum):
+            out[name] = v.value
+        else:
+            out[name] = v
+    return out
+
+
+def dump_config(cfg: PipelineConfig | None = None) -> str:
+    """YAML text of ``cfg`` (defaults when None) with a comment per field."""
+    import yaml
+
+    lines: list[str] = ["# amrvio pipeline configuration; keys are the field names"]
+
+    def emit(obj: Any, prefix: str, indent: int) -> None:
+        for name in _fields(type(obj)):
+            key = f"{prefix}{name}"
+            v = getattr(obj, name)
+            pad = "  " * indent
+            lines.append(f"{pad}# {HELP.get(key, '')}".rstrip())
+            if _is_config(type(v)):
+                lines.append(f"{pad}{name}:")
+                emit(v, key + ".", indent + 1)
+            else:
+                val = v.value if isinstance(v, enum.Enum) else v
+                text = yaml.safe_dump(val, default_flow_style=True).strip()
+                text = text.removesuffix("...").strip()
+                lines.append(f"{pad}{name}: {text}")
+
+    emit(cfg or PipelineConfig(), "", 0)
+    return "\n".join(lines) + "\n"
+
+
+def all_keys(cls: type = PipelineConfig, prefix: str = "") -> list[str]:
+    """Every settable dotted key of the tree."""
+    keys: list[str] = []
+    for name, (tp, _) in _fields(cls).items():
+        keys.append(prefix + name)
+        if _is_config(tp):
+            keys += all_keys(tp, prefix + name + ".")
+    return keys
+
+
+def without_photometric(cfg: PipelineConfig) -> PipelineConfig:
+    """The brightness-constancy ablation: no affine compensation in KLT, anchor re-tracking and
+    direct alignment (three config fields)."""
+    tr, mp = cfg.tracking, cfg.mapping
+    return dataclasses.replace(
+        cfg,
+        tracking=dataclasses.replace(tr, klt=dataclasses.replace(tr.klt, photometric=False),
+                                     direct=dataclasses.replace(tr.direct, estimate_affine=False)),
+        mapping=dataclasses.replace(mp, anchor=dataclasses.replace(mp.anchor, photometric=False)))
+
+
+__all__ = ["HELP", "OutputConfig", "PipelineConfig", "all_keys", "config_from_dict", "config_to_dict",
+           "dump_config", "load_config", "without_photometric"]

@@ -1,0 +1,179 @@
+"""Initializer stage: builds the first map of a segment from two views.
+
+It keeps a reference image and the tracks seen since; each frame it scores the two-view
+geometry between the reference and the current tracks (``geometry.two_view``). On success it
+creates the two keyframes and their points in the mapper it is given, bundle-adjusts them, and
+poses the frames in between by PnP. Every attempt returns an :class:`InitResult`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amrvio.estimator.mapper import Mapper
+from amrvio.frontend.tracker import Observations
+from amrvio.frontend.tracks import TrackSet
+from amrvio.geometry._common import se3_exp
+from amrvio.geometry.pnp import solve_pnp
+from amrvio.geometry.two_view import TwoViewConfig, TwoViewResult, TwoViewStatus, two_view_init
+from amrvio.types.lie import SE3
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+U8 = NDArray[np.uint8]
+
+
+@dataclass(frozen=True, slots=True)
+class InitConfig:
+    """Two-view gates; ``max_frames``: frames after which the reference is replaced;
+    ``static_flow_px``: median flow under which a low-parallax pair counts as a camera at rest;
+    PnP gates for posing the frames between the two views."""
+
+    two_view: TwoViewConfig = field(default_factory=lambda: TwoViewConfig(min_parallax_deg=3.0))
+    max_frames: int = 20
+    static_flow_px: float = 0.5
+    min_pnp_inliers: int = 25
+    pnp_thresh_px: float = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class InitResult:
+    """One initialisation attempt: the two-view status, the reference frame, the tracks shared
+    with it, parallax and flow, triangulated points, whether the camera looked static, and
+    whether the attempt window ended (a new reference is taken)."""
+
+    status: TwoViewStatus
+    ref_index: int
+    n_shared_tracks: int
+    median_parallax_deg: float
+    median_flow_px: float
+    n_points: int
+    static: bool
+    restart: bool
+
+    @property
+    def ok(self) -> bool:
+        return self.status is TwoViewStatus.OK
+
+
+@dataclass(frozen=True, slots=True)
+class FramePose:
+    """A frame between the two initial views: ``T_cam_kf0`` (4x4) from PnP, or None."""
+
+    index: int
+    T_cam_kf0: F64 | None
+    observations: Observations | None
+
+
+@dataclass(frozen=True, slots=True)
+class NewMap:
+    """What a successful initialisation made: the keyframe ids, the refined pose of the current
+    frame ``T_cam_world`` (4x4), the per-frame velocity, and the poses of the frames between."""
+
+    kf0: int
+    kf1: int
+    T_cam_world: F64
+    velocity: F64
+    between: tuple[FramePose, ...]
+
+
+class Initializer:
+    """Construct with the pinhole ``K`` (3x3), the config and the RANSAC seed."""
+
+    def __init__(self, K: F64, config: InitConfig, seed: int) -> None:
+        self.cfg = replace(config, two_view=replace(config.two_view, seed=seed))
+        self.K = K
+        self.seed = seed
+        self.ref_index = 0
+        self.ref_img: U8 | None = None
+        self.ref_ids: I64 = np.zeros(0, dtype=np.int64)
+        self.ref_pts: F64 = np.zeros((0, 2))
+        # (frame index, track ids, pixels) of each frame since the reference
+        self.history: list[tuple[int, I64, F64]] = []
+        self._last: TwoViewResult | None = None
+        self.timings: dict[str, float] = {}
+
+    def begin(self, index: int, img: U8, tracks: TrackSet, keep_history: bool) -> None:
+        """Frame ``index`` becomes the reference. ``keep_history`` (a retry in the same place)
+        keeps the frames of the failed attempt, so that they still get a pose by PnP."""
+        history = self.history[-self.cfg.max_frames * 3:] if keep_history else []
+        self.ref_index = index
+        self.ref_img = img
+        self.ref_ids = tracks.ids.copy()
+        self.ref_pts = tracks.pts.copy()
+        if history and history[-1][0] == index:
+            history = history[:-1]
+        self.history = [*history, (index, tracks.ids.copy(), tracks.pts.copy())]
+
+    def attempt(self, index: int, tracks: TrackSet) -> InitResult:
+        """Score the two-view geometry between the reference and the current tracks."""
+        self.history.append((index, tracks.ids.copy(), tracks.pts.copy()))
+        ref_mask = np.isin(self.ref_ids, tracks.ids)
+        cur_mask = np.isin(tracks.ids, self.ref_ids)
+        # both arrays are sorted by id (ids only ever get filtered), so they align
+        t0 = time.perf_counter()
+        tv = two_view_init(self.ref_pts[ref_mask], tracks.pts[cur_mask], self.K, self.cfg.two_view)
+        self.timings["init"] = self.timings.get("init", 0.0) + time.perf_counter() - t0
+        self._last = tv
+        static = (tv.status is TwoViewStatus.LOW_PARALLAX
+                  and tv.median_flow_px < self.cfg.static_flow_px)
+        too_old = index - self.ref_index >= self.cfg.max_frames
+        restart = not tv.ok and (too_old or len(tracks) < self.cfg.two_view.min_points)
+        return InitResult(tv.status, self.ref_index, int(cur_mask.sum()), tv.median_parallax_deg,
+                          tv.median_flow_px, int(tv.point_valid.sum()) if tv.ok else 0, static,
+                          restart)
+
+    def window_ended(self, index: int) -> bool:
+        """The reference is too old: a retry keeps the history."""
+        return index - self.ref_index >= self.cfg.max_frames
+
+    def build(self, index: int, tracks: TrackSet, mapper: Mapper) -> NewMap:
+        """After a successful :meth:`attempt` at frame ``index``: the first two keyframes, their
+        points and a local BA in ``mapper``; the tracks keep those seen in the reference, first
+        seen in keyframe 0; the frames in between are posed by PnP."""
+        tv = self._last
+        if tv is None or not tv.ok:
+            raise RuntimeError("Initializer.build without a successful attempt")
+        m = mapper.map
+        ref_mask = np.isin(self.ref_ids, tracks.ids)
+        ref_ids, ref_pts = self.ref_ids[ref_mask], self.ref_pts[ref_mask]
+        cur_mask = np.isin(tracks.ids, self.ref_ids)
+        T0 = np.eye(4)
+        kf0 = m.add_keyframe(self.ref_index, T0, ref_ids, ref_pts)
+        m.ensure_capacity(tracks.next_id)
+        good = tv.point_valid
+        m.set_points(ref_ids[good], tv.points_c1[good])
+        tracks.keep(cur_mask)
+        tracks.anchor(kf0.kf_id, ref_pts)
+        kf1 = m.add_keyframe(index, tv.T_c2_c1, tracks.ids, tracks.pts)
+        mapper.local_ba()
+        T1 = m.keyframes[kf1.kf_id].T_cam_world
+        between = []
+        for fi, ids_f, pts_f in self.history:
+            if fi in (self.ref_index, index):
+                continue
+            between.append(self._pose_between(fi, ids_f, pts_f, mapper, T0))
+        # per-frame velocity from the init baseline (geometric mean of the motion)
+        n_frames = max(index - self.ref_index, 1)
+        xi = SE3.from_matrix(T1).log() / n_frames
+        velocity = se3_exp(np.asarray(xi, dtype=np.float64))
+        self._last = None
+        return NewMap(kf0.kf_id, kf1.kf_id, T1.copy(), velocity, tuple(between))
+
+    def _pose_between(self, fi: int, ids_f: I64, pts_f: F64, mapper: Mapper, T0: F64) -> FramePose:
+        m = mapper.map
+        has = m.points_of(ids_f)
+        if int(has.sum()) >= self.cfg.min_pnp_inliers:
+            r = solve_pnp(m.xyz[ids_f[has]], pts_f[has], self.K, T_guess=T0,
+                          ransac_thresh_px=self.cfg.pnp_thresh_px, seed=self.seed)
+            if r.ok:
+                obs = Observations(ids_f[has][r.inliers], pts_f[has][r.inliers])
+                return FramePose(fi, r.T_cam_world.copy(), obs)
+        return FramePose(fi, None, None)
+
+
+__all__ = ["FramePose", "InitConfig", "InitResult", "Initializer", "NewMap"]

@@ -1,0 +1,297 @@
+"""Tracker stage: follows the track set from image to image and poses the camera against the map.
+
+Per frame: a motion-model prediction (direct alignment after a gap), KLT with the prediction as
+the initial flow, PnP RANSAC + Huber against the map, and the direct-alignment fallback when
+features are scarce. The tracker owns the :class:`TrackSet`, the last good image and the constant
+velocity model; it reads the map it is given and never changes it.
+
+Poses inside are 4x4 ``T_cam_world`` arrays of the current map segment.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amrvio.frontend.direct import DirectConfig, align_direct
+from amrvio.frontend.klt import KltConfig, KltResult, KltTracker, detect_bucketed, predict_tracks
+from amrvio.frontend.tracks import UNANCHORED, TrackSet
+from amrvio.geometry._common import invert_T, project
+from amrvio.geometry.pnp import solve_pnp
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+U8 = NDArray[np.uint8]
+
+
+class Landmarks(Protocol):
+    """What the tracker reads of a map: point positions by track id (``xyz`` (M, 3))."""
+
+    xyz: F64
+
+    def points_of(self, track_ids: I64) -> NDArray[np.bool_]: ...
+
+    def ensure_capacity(self, n_tracks: int) -> None: ...
+
+
+@dataclass(frozen=True, slots=True)
+class TrackingConfig:
+    """KLT front-end, PnP gates (pixels) and the direct-alignment prior/fallback switches."""
+
+    klt: KltConfig = field(default_factory=KltConfig)
+    direct: DirectConfig = field(default_factory=DirectConfig)
+    direct_prior: bool = True
+    direct_fallback: bool = True
+    min_pnp_inliers: int = 25
+    pnp_thresh_px: float = 1.0
+    huber_px: float = 2.0
+
+
+class TrackOutcome(Enum):
+    """What the tracker made of a frame."""
+
+    STARTED = "started"  # a new reference image: tracks detected, no pose
+    INIT_TRACKED = "init_tracked"  # tracked towards the initialisation reference, no pose yet
+    SKIPPED_BLURRED = "skipped_blurred"  # blurred before the map exists: not used
+    TRACKED = "tracked"  # PnP pose; tracks committed
+    TRACKED_BLURRED = "tracked_blurred"  # PnP pose on a blurred frame; tracks not committed
+    PREDICTED = "predicted"  # blurred and PnP failed: the motion-model pose
+    DIRECT = "direct_fallback"  # pose from direct alignment; tracks re-seeded from the map
+    LOST = "lost"  # no pose: tracking must restart
+
+
+@dataclass(frozen=True, slots=True)
+class TrackingReport:
+    """For the frame record: outcome, tracks alive after the frame, PnP inliers, the affine
+    brightness change (a, b) used by KLT, whether direct alignment gave the prior, and the PnP
+    status when PnP ran."""
+
+    outcome: TrackOutcome
+    n_tracks: int
+    n_inliers: int
+    brightness_a: float
+    brightness_b: float
+    direct_prior: bool
+    pnp_status: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class Observations:
+    """PnP inlier tracks of a frame: ids (M,) and pixels (M, 2), for the final refinement."""
+
+    ids: I64
+    uv: F64
+
+
+@dataclass(frozen=True, slots=True)
+class TrackStep:
+    """A tracked frame: the report, the pose ``T_cam_world`` (4x4; the prediction when the
+    outcome has no measured pose) and the inlier observations when PnP succeeded."""
+
+    report: TrackingReport
+    T_cam_world: F64
+    observations: Observations | None
+
+
+class MotionModel:
+    """Constant velocity: ``velocity`` = T_k_k-1 per frame, ``T_last`` = T_cam_world of the last
+    good frame, and recent speeds in global units per frame (``speeds``)."""
+
+    def __init__(self) -> None:
+        self.velocity: F64 = np.eye(4)
+        self.T_last: F64 | None = None
+        self.speeds: deque[float] = deque(maxlen=50)
+
+    def guess(self) -> F64:
+        """Pose guess for a frame without a measurement."""
+        return np.eye(4) if self.T_last is None else self.velocity @ self.T_last
+
+    def typical_speed(self) -> float:
+        """Median of the recent non-zero speeds (1.0 when there are none)."""
+        moving = [v for v in self.speeds if v > 0]
+        return float(np.median(moving)) if moving else 1.0
+
+
+class Tracker:
+    """Construct with the pinhole ``K`` (3x3) of undistorted pixels. ``timings`` accumulates
+    seconds per step."""
+
+    def __init__(self, K: F64, config: TrackingConfig, seed: int) -> None:
+        self.cfg = config
+        self.K = K
+        self.seed = seed
+        self.klt = KltTracker(config.klt)
+        self.tracks = TrackSet()
+        self.motion = MotionModel()
+        self.prev_img: U8 | None = None
+        self.gap = 0  # frames since the last good (committed) image
+        self.timings: dict[str, float] = {}
+
+    def _toc(self, stage: str, t0: float) -> None:
+        self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - t0
+
+    @property
+    def started(self) -> bool:
+        return self.prev_img is not None
+
+    def detect(self, img: U8, kf_id: int = UNANCHORED) -> None:
+        """Top the track set up with new corners when it fell below 90 % of the target."""
+        t0 = time.perf_counter()
+        want = self.cfg.klt.max_features - len(self.tracks)
+        if want > 0.1 * self.cfg.klt.max_features:
+            self.tracks.add(detect_bucketed(img, self.tracks.pts, want, self.cfg.klt), kf_id)
+        self._toc("detect", t0)
+
+    def restart(self, img: U8, keep_tracks: bool) -> None:
+        """Make ``img`` the new reference image (for a new initialisation attempt)."""
+        self.prev_img = img
+        if not keep_tracks:
+            self.tracks.clear()
+        self.detect(img)
+        self.gap = 0
+
+    def adopt_map_pose(self, T_cam_world: F64, velocity: F64) -> None:
+        """A new map fixed the pose of the current image and the velocity."""
+        self.motion.velocity = velocity
+        self.motion.T_last = T_cam_world.copy()
+
+    def _report(self, outcome: TrackOutcome, res: KltResult | None, n_inl: int = 0,
+                prior: bool = False, pnp: str | None = None) -> TrackingReport:
+        a = res.brightness.a if res is not None else 1.0
+        b = res.brightness.b if res is not None else 0.0
+        return TrackingReport(outcome, len(self.tracks), n_inl, a, b, prior, pnp)
+
+    def started_report(self) -> TrackingReport:
+        return self._report(TrackOutcome.STARTED, None)
+
+    def track_to_reference(self, img: U8, blurred: bool) -> TrackingReport:
+        """Before the map exists: KLT from the last good image; commit unless ``blurred``."""
+        if self.prev_img is None:
+            raise RuntimeError("Tracker: track_to_reference before restart()")
+        t0 = time.perf_counter()
+        res = self.klt.track(self.prev_img, img, self.tracks.pts, wide=self.gap > 0, K=self.K)
+        self._toc("klt", t0)
+        if blurred:
+            self.gap += 1
+            return self._report(TrackOutcome.SKIPPED_BLURRED, res)
+        self.gap = 0
+        self.tracks.keep(res.ok)
+        self.tracks.move(res.pts[res.ok])
+        self.prev_img = img
+        return self._report(TrackOutcome.INIT_TRACKED, res)
+
+    def track(self, img: U8, blurred: bool, m: Landmarks, segment_scale: float) -> TrackStep:
+        """Pose ``img`` against the map ``m`` (segment units; ``segment_scale`` global units per
+        segment unit, for the speed record)."""
+        T_last = self.motion.T_last
+        if self.prev_img is None or T_last is None:
+            raise RuntimeError("Tracker: track() without a previous frame")
+        cfg, mot, tr = self.cfg, self.motion, self.tracks
+        steps = self.gap + 1
+        V = np.linalg.matrix_power(mot.velocity, steps)
+        prior = False
+        if self.gap > 0 and cfg.direct_prior:
+            # resuming after blur: direct alignment to the last good image gives the prior
+            d = self._direct(img, V, m)
+            if d is not None:
+                V, prior = d, True
+        T_pred = V @ T_last
+        t0 = time.perf_counter()
+        has = m.points_of(tr.ids)
+        xyz = np.zeros((len(tr.ids), 3))
+        xyz[has] = m.xyz[tr.ids[has]]
+        pred = predict_tracks(self.K, T_pred, V[:3, :3], tr.pts, xyz, has, img.shape)
+        self._toc("predict", t0)
+        t0 = time.perf_counter()
+        res = self.klt.track(self.prev_img, img, tr.pts, pts_pred=pred, wide=self.gap > 0,
+                             K=self.K)
+        self._toc("klt", t0)
+        use = res.ok & has
+        t0 = time.perf_counter()
+        pnp = solve_pnp(m.xyz[tr.ids[use]], res.pts[use], self.K, T_guess=T_pred,
+                        ransac_thresh_px=cfg.pnp_thresh_px, min_inliers=cfg.min_pnp_inliers,
+                        huber_px=cfg.huber_px, seed=self.seed)
+        self._toc("pnp", t0)
+        if not pnp.ok:
+            if blurred:
+                self.gap += 1
+                return TrackStep(self._report(TrackOutcome.PREDICTED, res, 0, prior,
+                                              pnp.status.value), T_pred, None)
+            # features scarce: direct alignment to the last good image as the fallback
+            d = self._direct(img, V, m) if cfg.direct_fallback else None
+            if d is not None:
+                return self._direct_fallback(img, d, m, res, prior)
+            mot.T_last = T_pred
+            return TrackStep(self._report(TrackOutcome.LOST, res, 0, prior, pnp.status.value),
+                             T_pred, None)
+        T_cw = pnp.T_cam_world
+        n_inl = int(pnp.inliers.sum())
+        obs = Observations(tr.ids[use][pnp.inliers].copy(), res.pts[use][pnp.inliers].copy())
+        if blurred:
+            # pose only; keep the last good image as the tracking reference
+            self.gap += 1
+            return TrackStep(self._report(TrackOutcome.TRACKED_BLURRED, res, n_inl, prior,
+                                          pnp.status.value), T_cw, obs)
+        # commit the tracks: drop KLT failures and PnP outliers
+        bad = np.zeros(len(tr.ids), dtype=bool)
+        bad[np.flatnonzero(use)[~pnp.inliers]] = True
+        tr.move(res.pts)
+        tr.keep(res.ok & ~bad)
+        self.prev_img = img
+        dT = T_cw @ invert_T(T_last)
+        if steps == 1:
+            mot.velocity = dT
+        mot.speeds.append(segment_scale * float(np.linalg.norm(dT[:3, 3])) / steps)
+        mot.T_last = T_cw
+        self.gap = 0
+        return TrackStep(self._report(TrackOutcome.TRACKED, res, n_inl, prior, pnp.status.value),
+                         T_cw, obs)
+
+    def _direct(self, img: U8, V: F64, m: Landmarks) -> F64 | None:
+        """T_cur_prev from sparse direct alignment (SE(3) + affine brightness) of ``img`` to the
+        last good image, with the tracked map points as depth; None on failure."""
+        if self.prev_img is None or self.motion.T_last is None:
+            raise RuntimeError("Tracker: direct alignment without a previous frame")
+        tr = self.tracks
+        has = m.points_of(tr.ids)
+        if int(has.sum()) < self.cfg.direct.min_pixels:
+            return None
+        t0 = time.perf_counter()
+        X = m.xyz[tr.ids[has]]
+        T_last = self.motion.T_last
+        depth = X @ T_last[2, :3] + T_last[2, 3]
+        res = align_direct(self.prev_img, img, tr.pts[has], depth, self.K, T_init=V,
+                           config=self.cfg.direct)
+        self._toc("direct", t0)
+        return res.T_cur_ref if res.ok else None
+
+    def _direct_fallback(self, img: U8, V: F64, m: Landmarks, res: KltResult,
+                         prior: bool) -> TrackStep:
+        """Pose from direct alignment; re-seed the tracks by projecting the map points."""
+        if self.motion.T_last is None:
+            raise RuntimeError("Tracker: direct fallback without a previous pose")
+        tr = self.tracks
+        T_cw = V @ self.motion.T_last
+        m.ensure_capacity(tr.next_id)
+        has = m.points_of(tr.ids)
+        uv, z = project(self.K, T_cw, m.xyz[tr.ids])
+        h, w = img.shape
+        inside = has & (z > 0) & (uv[:, 0] >= 8) & (uv[:, 0] < w - 8) & (uv[:, 1] >= 8) & \
+            (uv[:, 1] < h - 8)
+        tr.move(np.where(inside[:, None], uv, tr.pts))
+        tr.keep(inside)
+        self.prev_img = img
+        self.motion.velocity = V if self.gap == 0 else self.motion.velocity
+        self.motion.T_last = T_cw
+        self.gap = 0
+        return TrackStep(self._report(TrackOutcome.DIRECT, res, 0, prior), T_cw, None)
+
+
+__all__ = ["Landmarks", "MotionModel", "Observations", "TrackOutcome", "TrackStep", "Tracker", "TrackingConfig",
+           "TrackingReport"]

@@ -1,0 +1,179 @@
+"""TrajectoryComposer: the final pose of every frame, from what each frame was anchored to.
+
+While the run goes, each frame gets a :class:`PoseAnchor`: its pose relative to a keyframe of a
+map segment, an absolute pose (before a map, or a guess), or nothing (to interpolate). At the end
+the composer reads the bundle-adjusted keyframes, refines non-keyframe poses against the final
+map, resolves frames that share the pose of another (a camera at rest before initialisation),
+interpolates the rest, and applies the per-frame metric scale.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amrvio.estimator.local_mapping import Segment
+from amrvio.estimator.vo_map import VoMap
+from amrvio.frontend.tracker import Observations
+from amrvio.geometry._common import invert_T, project
+from amrvio.geometry.pnp import refine_pose_huber
+from amrvio.pipeline.records import PoseStatus
+from amrvio.types.lie import SE3, SO3
+
+F64 = NDArray[np.float64]
+
+
+class AnchorKind(Enum):
+    """What ``PoseAnchor.T_cam_ref`` is relative to."""
+
+    KEYFRAME = "keyframe"  # keyframe ``keyframe`` of ``segment``
+    ABSOLUTE = "absolute"  # the world of ``segment`` (the global world when segment is None)
+    INTERPOLATE = "interpolate"  # no pose of its own: interpolated between tracked neighbours
+
+
+@dataclass(frozen=True, slots=True)
+class PoseAnchor:
+    """How a frame's pose is composed at the end. ``same_pose_as``: the frame had not moved
+    from that frame (before initialisation) and takes its pose when that one is tracked."""
+
+    status: PoseStatus
+    kind: AnchorKind
+    segment: int | None
+    keyframe: int | None
+    T_cam_ref: F64
+    observations: Observations | None = None
+    same_pose_as: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class RefineGates:
+    """Motion-only refinement of non-keyframe poses against the final map: on/off, the PnP
+    inlier count it needs, the Huber threshold and the median reprojection it must reach (px)."""
+
+    enabled: bool
+    min_points: int
+    huber_px: float
+    max_median_px: float
+
+
+@dataclass(frozen=True, slots=True)
+class ComposedTrajectory:
+    """(N, 4, 4) ``T_world_cam`` and the (N,) final statuses."""
+
+    T_world_cam: F64
+    statuses: tuple[PoseStatus, ...]
+
+
+def to_se3(T: F64) -> SE3:
+    """A 4x4 pose as an SE3 value, bit-exact (no re-orthonormalisation)."""
+    return SE3(SO3(T[:3, :3]), T[:3, 3])
+
+
+class TrajectoryComposer:
+    """Construct with the pinhole ``K`` (3x3) and the refinement gates."""
+
+    def __init__(self, K: F64, gates: RefineGates) -> None:
+        self.K = K
+        self.gates = gates
+        self.anchors: list[PoseAnchor] = []
+
+    def add(self, anchor: PoseAnchor) -> None:
+        self.anchors.append(anchor)
+
+    def replace(self, index: int, anchor: PoseAnchor) -> None:
+        self.anchors[index] = anchor
+
+    def pose_in_world(self, index: int, segments: list[Segment]) -> F64:
+        """4x4 ``T_world_cam`` of an anchored frame with the keyframes as they are now."""
+        a = self.anchors[index]
+        sg = segments[a.segment] if a.segment is not None else None
+        T_cw = a.T_cam_ref
+        if a.kind is AnchorKind.KEYFRAME and sg is not None and a.keyframe is not None:
+            T_cw = a.T_cam_ref @ sg.mapper.map.keyframes[a.keyframe].T_cam_world
+        return sg.pose_in_world(T_cw) if sg is not None else invert_T(T_cw)
+
+    def _refine(self, m: VoMap, T_cw: F64, obs: Observations) -> F64:
+        has = m.points_of(obs.ids)
+        if int(has.sum()) < self.gates.min_points:
+            return T_cw
+        X = m.xyz[obs.ids[has]]
+        T = refine_pose_huber(T_cw, X, obs.uv[has], self.K, huber_px=self.gates.huber_px,
+                              iterations=5)
+        proj, _ = project(self.K, T, X)
+        err = np.linalg.norm(proj - obs.uv[has], axis=1)
+        if not np.all(np.isfinite(T)) or float(np.median(err)) > self.gates.max_median_px:
+            return T_cw
+        return T
+
+    def finish(self, segments: list[Segment], frame_scale: F64 | None) -> ComposedTrajectory:
+        """Compose all poses; ``frame_scale`` (N,), when a scale source is active, scales each
+        position increment."""
+        n = len(self.anchors)
+        T_wc = np.zeros((n, 4, 4))
+        for i, a in enumerate(self.anchors):
+            if a.kind is AnchorKind.INTERPOLATE:
+                continue
+            sg = segments[a.segment] if a.segment is not None else None
+            if a.kind is AnchorKind.KEYFRAME and sg is not None and a.keyframe is not None:
+                m = sg.mapper.map
+                T_cw = a.T_cam_ref @ m.keyframes[a.keyframe].T_cam_world
+                if self.gates.enabled and a.observations is not None:
+                    T_cw = self._refine(m, T_cw, a.observations)
+            else:
+                T_cw = a.T_cam_ref
+            T_wc[i] = sg.pose_in_world(T_cw) if sg is not None else invert_T(T_cw)
+        statuses = [a.status for a in self.anchors]
+        # frames at rest before an initialisation take the pose of the frame they match
+        for i, a in enumerate(self.anchors):
+            j, hops = a.same_pose_as, 0
+            while j is not None and self.anchors[j].same_pose_as is not None and hops < n:
+                j, hops = self.anchors[j].same_pose_as, hops + 1
+            if a.same_pose_as is not None and j is not None and statuses[j] is PoseStatus.TRACKED:
+                T_wc[i] = T_wc[j]
+                statuses[i] = PoseStatus.TRACKED
+        tracked = np.flatnonzero([s is PoseStatus.TRACKED for s in statuses])
+        if len(tracked):
+            T_wc = _fill_interpolated(T_wc, statuses, tracked)
+        if frame_scale is not None:
+            # metric scale: scale each position increment (smoothed per keyframe)
+            p = T_wc[:, :3, 3].copy()
+            q = p.copy()
+            q[0] = p[0] * frame_scale[0]
+            for i in range(1, n):
+                q[i] = q[i - 1] + 0.5 * (frame_scale[i] + frame_scale[i - 1]) * (p[i] - p[i - 1])
+            T_wc[:, :3, 3] = q
+        return ComposedTrajectory(T_wc, tuple(statuses))
+
+
+def _fill_interpolated(T_wc: F64, statuses: list[PoseStatus], tracked: NDArray[np.intp]) -> F64:
+    """Interpolate non-tracked frames between tracked neighbours (SLERP + linear); hold the
+    nearest tracked pose at the ends (those frames become LOST)."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    out = T_wc.copy()
+    n = len(statuses)
+    rots = Rotation.from_matrix(T_wc[tracked, :3, :3])
+    slerp = Slerp(tracked.astype(float), rots) if len(tracked) >= 2 else None
+    for i in range(n):
+        if statuses[i] is PoseStatus.TRACKED:
+            continue
+        j = int(np.searchsorted(tracked, i))
+        if 0 < j < len(tracked) and slerp is not None:
+            i0, i1 = tracked[j - 1], tracked[j]
+            al = (i - i0) / (i1 - i0)
+            out[i] = np.eye(4)
+            out[i, :3, :3] = slerp([float(i)]).as_matrix()[0]
+            out[i, :3, 3] = (1 - al) * T_wc[i0, :3, 3] + al * T_wc[i1, :3, 3]
+            statuses[i] = PoseStatus.INTERPOLATED
+        elif statuses[i] is PoseStatus.INTERPOLATED or not np.all(np.isfinite(out[i])) or \
+                abs(np.linalg.det(out[i, :3, :3]) - 1) > 1e-3:
+            out[i] = T_wc[tracked[min(j, len(tracked) - 1)]]
+            statuses[i] = PoseStatus.LOST
+    return out
+
+
+__all__ = ["AnchorKind", "ComposedTrajectory", "PoseAnchor", "RefineGates", "TrajectoryComposer",
+           "to_se3"]

@@ -1,0 +1,303 @@
+"""The per-frame loop, in the order of the seed's flowchart:
+
+    FrameDiagnostics -> blur gate -> Tracker (owns the TrackSet) -> Initializer (InitResult)
+    -> LocalMapping (keyframes, triangulation, local BA; the VI smoother plugs in here)
+    -> scale sources (camera height) -> TrajectoryComposer
+
+``Pipeline.process(image, t_ns)`` returns the frame's :class:`FrameRecord`; ``finish()`` composes
+the refined trajectory and returns every record with its final pose. The pipeline wires the
+stages and owns the records; each stage owns its own state.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amrvio.config import PipelineConfig
+from amrvio.diagnostics.blur import BlurResult, BlurScorer, var_laplacian
+from amrvio.diagnostics.frame import FrameDiagnostics, FrameHealth
+from amrvio.estimator.camera_height import HeightEstimate
+from amrvio.estimator.initializer import Initializer, InitResult
+from amrvio.estimator.local_mapping import KeyframeReport, LocalMapping, sim3_of
+from amrvio.estimator.scale_sources import CameraHeightScale
+from amrvio.frontend.keyframe_policy import KeyframeReason
+from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, TrackOutcome
+from amrvio.geometry._common import invert_T
+from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
+from amrvio.pipeline.records import EstimatorReport, FrameRecord, PoseStatus
+from amrvio.types.sensors import ImuData
+
+F64 = NDArray[np.float64]
+U8 = NDArray[np.uint8]
+
+
+@dataclass(frozen=True, slots=True)
+class _Step:
+    """What one frame produced, before it becomes a record: the pose anchor, the absolute
+    ``T_cam_world`` (4x4, current segment) known now, and the stage reports."""
+
+    anchor: PoseAnchor
+    T_cam_world: F64
+    tracking: TrackingReport
+    init: InitResult | None = None
+    keyframe: KeyframeReport | None = None
+    scale: HeightEstimate | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class PipelineOutput:
+    """The run: one record per frame (final poses), (N, 4, 4) ``T_world_cam`` of the refined
+    trajectory, keyframe frame indices, (P, 3) map points, the camera-height readings, the
+    per-frame scale and seconds per stage."""
+
+    records: tuple[FrameRecord, ...]
+    T_world_cam: F64
+    keyframe_indices: NDArray[np.int64]
+    map_points: F64
+    height_readings: tuple[HeightEstimate, ...]
+    frame_scale: F64
+    timings_s: dict[str, float]
+
+    @property
+    def stamps_ns(self) -> NDArray[np.int64]:
+        return np.array([r.t_ns for r in self.records], dtype=np.int64)
+
+
+def blur_score(image: U8) -> float:
+    """var(Laplacian) / var(I) on every 2nd pixel: invariant to an affine brightness change."""
+    sub = image[::2, ::2]
+    return var_laplacian(image, step=2) / max(float(np.var(sub)), 1.0)
+
+
+class Pipeline:
+    """Monocular VO with per-frame diagnostics. Construct with the pinhole ``K`` (3x3) of
+    undistorted pixels; ``diagnostics`` is the FrameDiagnostics stage (None: off)."""
+
+    def __init__(self, K: F64, config: PipelineConfig | None = None,
+                 diagnostics: FrameDiagnostics | None = None) -> None:
+        cfg = config or PipelineConfig()
+        self.cfg = cfg
+        K = np.asarray(K, dtype=np.float64)
+        tracking = dataclasses.replace(cfg.tracking,
+                                       klt=dataclasses.replace(cfg.tracking.klt, seed=cfg.seed))
+        self.tracker = Tracker(K, tracking, cfg.seed)
+        self.initializer = Initializer(K, cfg.init, cfg.seed)
+        self.mapping = LocalMapping(K, cfg.mapping)
+        self.scale = CameraHeightScale(cfg.scale, cfg.seed)
+        self.composer = TrajectoryComposer(K, RefineGates(
+            cfg.output.final_refine, tracking.min_pnp_inliers, tracking.huber_px,
+            tracking.pnp_thresh_px))
+        self.diagnostics = diagnostics
+        self.blur = BlurScorer(cfg.blur)
+        self.records: list[FrameRecord] = []
+        self.initialised = False
+        self.timings: dict[str, float] = {}
+
+    def _toc(self, stage: str, t0: float) -> None:
+        self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - t0
+
+    # ------------------------------------------------------------------ the loop
+    def process(self, image: U8, t_ns: int, imu: ImuData | None = None,
+                exposure_s: float | None = None) -> FrameRecord:
+        """Consume the next grey image (H, W) uint8 taken at ``t_ns``; ``imu``: the IMU samples
+        since the previous frame (for the diagnostics)."""
+        index = len(self.records)
+        health = None
+        if self.diagnostics is not None:
+            t0 = time.perf_counter()
+            health = self.diagnostics.process(image, t_ns, imu, exposure_s, index)
+            self._toc("diagnostics", t0)
+        t0 = time.perf_counter()
+        blur = self.blur.update(blur_score(image))
+        blurred = bool(blur.is_blurred) and self.cfg.blur_gating
+        self._toc("blur", t0)
+        events: list[str] = []
+        if not self.cfg.track:
+            rec = FrameRecord(index, t_ns, PoseStatus.LOST, None, None, None, 1.0, (), blur, health,
+                              None, EstimatorReport())
+            self.records.append(rec)
+            return rec
+        if not self.tracker.started:
+            step = self._start(index, image, events, keep_tracks=False)
+        elif not self.initialised:
+            step = self._init_step(index, image, blurred, events)
+        else:
+            step = self._track_step(index, image, blurred, events)
+        return self._emit(index, t_ns, blur, health, step, events)
+
+    def _emit(self, index: int, t_ns: int, blur: BlurResult, health: FrameHealth | None,
+              step: _Step, events: list[str]) -> FrameRecord:
+        self.composer.add(step.anchor)
+        segs = self.mapping.segments
+        T_wc = segs[-1].pose_in_world(step.T_cam_world) if segs else invert_T(step.T_cam_world)
+        tracking = dataclasses.replace(step.tracking, n_tracks=len(self.tracker.tracks))
+        rec = FrameRecord(index, t_ns, step.anchor.status, to_se3(T_wc), None,
+                          step.anchor.segment, 1.0, tuple(events), blur, health, tracking,
+                          EstimatorReport(step.init, step.keyframe, step.scale))
+        self.records.append(rec)
+        return rec
+
+    def _segment_id(self) -> int | None:
+        return len(self.mapping.segments) - 1 if self.mapping.segments else None
+
+    def _absolute(self, status: PoseStatus, T_cw: F64, same_as: int | None = None) -> PoseAnchor:
+        return PoseAnchor(status, AnchorKind.ABSOLUTE, self._segment_id(), None, T_cw.copy(),
+                          None, same_as)
+
+    def _on_keyframe(self, T_cw: F64, kf_id: int, obs: Observations | None) -> PoseAnchor:
+        """A tracked pose, kept relative to keyframe ``kf_id`` so that BA moves it along."""
+        T_kf = self.mapping.current.mapper.map.keyframes[kf_id].T_cam_world
+        return PoseAnchor(PoseStatus.TRACKED, AnchorKind.KEYFRAME, self._segment_id(), kf_id,
+                          T_cw @ invert_T(T_kf), obs, None)
+
+    # ------------------------------------------------------------------ before a map
+    def _start(self, index: int, img: U8, events: list[str], keep_tracks: bool,
+               init: InitResult | None = None) -> _Step:
+        """Frame ``index`` becomes the reference of a new initialisation attempt."""
+        self.tracker.restart(img, keep_tracks)
+        self.initializer.begin(index, img, self.tracker.tracks, keep_tracks)
+        self.initialised = False
+        T_guess = self.tracker.motion.guess()
+        return _Step(self._absolute(PoseStatus.LOST, T_guess), T_guess,
+                     self.tracker.started_report(), init)
+
+    def _init_step(self, index: int, img: U8, blurred: bool, events: list[str]) -> _Step:
+        report = self.tracker.track_to_reference(img, blurred)
+        T_hold = self.composer.anchors[-1].T_cam_ref
+        if blurred:
+            return _Step(self._absolute(PoseStatus.LOST, T_hold), T_hold, report)
+        res = self.initializer.attempt(index, self.tracker.tracks)
+        if res.ok:
+            return self._make_map(index, img, res, report, events)
+        if res.restart:
+            events.append(f"init_failed:{res.status.value}")
+            step = self._start(index, img, events, self.initializer.window_ended(index), res)
+            if res.static:  # the camera did not move: the old reference shares this pose
+                old = self.composer.anchors[res.ref_index]
+                self.composer.replace(res.ref_index, dataclasses.replace(old, same_pose_as=index))
+            return step
+        same = res.ref_index if res.static else None
+        return _Step(self._absolute(PoseStatus.LOST, T_hold, same), T_hold, report, res)
+
+    def _make_map(self, index: int, img: U8, res: InitResult, report: TrackingReport,
+                  events: list[str]) -> _Step:
+        ref = res.ref_index
+        R_g, t_g, s_g = np.eye(3), np.zeros(3), 1.0
+        if self.mapping.segments:
+            # link the new segment to the world through the reference frame's last known pose;
+            # keep the previous segment's typical speed: |t| = 1 map unit spans (index - ref)
+            # frames. A guess, logged as such; --camera-height corrects it.
+            a = self.composer.anchors[ref]
+            sg = self.mapping.current
+            T_cw_ref = a.T_cam_ref
+            if a.kind is AnchorKind.KEYFRAME and a.keyframe is not None:
+                T_cw_ref = a.T_cam_ref @ sg.mapper.map.keyframes[a.keyframe].T_cam_world
+            T_wc_ref = invert_T(T_cw_ref)
+            sim = sg.world_from_segment
+            R_g = sim.R @ T_wc_ref[:3, :3]
+            t_g = sim.s * sim.R @ T_wc_ref[:3, 3] + sim.t
+            s_g = max(self.tracker.motion.typical_speed() * (index - ref), 1e-6)
+            events.append(f"segment_scale_guess:{s_g:.4g}")
+        seg = self.mapping.new_segment(sim3_of(R_g, t_g, s_g))
+        seg_id = len(self.mapping.segments) - 1
+        tracks = self.tracker.tracks
+        new = self.initializer.build(index, tracks, seg.mapper)
+        self.initialised = True
+        for fp in new.between:
+            old = self.composer.anchors[fp.index]
+            if fp.T_cam_kf0 is not None:
+                anchor = PoseAnchor(PoseStatus.TRACKED, AnchorKind.KEYFRAME, seg_id, new.kf0,
+                                    fp.T_cam_kf0, fp.observations, None)
+            else:
+                anchor = dataclasses.replace(old, status=PoseStatus.INTERPOLATED,
+                                             kind=AnchorKind.INTERPOLATE, segment=seg_id,
+                                             keyframe=None, same_pose_as=None)
+            self.composer.replace(fp.index, anchor)
+        old_ref = self.composer.anchors[ref]
+        self.composer.replace(ref, dataclasses.replace(
+            old_ref, status=PoseStatus.TRACKED, kind=AnchorKind.KEYFRAME, segment=seg_id,
+            keyframe=new.kf0, T_cam_ref=np.eye(4)))
+        self.tracker.adopt_map_pose(new.T_cam_world, new.velocity)
+        self.tracker.detect(img, new.kf1)
+        reading = self.scale.observe_keyframe(seg, new.kf1)
+        if self.initializer.ref_img is not None:
+            self.mapping.keep_image(new.kf0, self.initializer.ref_img)
+        self.mapping.seal_keyframe(new.kf1, img, tracks)
+        events.append(f"init_ok:ref={ref}")
+        kf = KeyframeReport(new.kf1, None, 0, res.n_points, None)
+        report = dataclasses.replace(report, n_inliers=res.n_points)
+        return _Step(self._on_keyframe(new.T_cam_world, new.kf1, None), new.T_cam_world, report,
+                     res, kf, reading)
+
+    # ------------------------------------------------------------------ with a map
+    def _track_step(self, index: int, img: U8, blurred: bool, events: list[str]) -> _Step:
+        seg = self.mapping.current
+        tracks = self.tracker.tracks
+        step = self.tracker.track(img, blurred, seg.mapper.map, seg.world_from_segment.s)
+        rep = step.report
+        if rep.direct_prior:
+            events.append("direct_prior")
+        last_kf = len(seg.mapper.map.keyframes) - 1
+        if rep.outcome is TrackOutcome.PREDICTED:
+            return _Step(self._absolute(PoseStatus.INTERPOLATED, step.T_cam_world),
+                         step.T_cam_world, rep)
+        if rep.outcome is TrackOutcome.LOST:
+            events.append(f"lost:{rep.pnp_status}")
+            lost = self._start(index, img, events, keep_tracks=False)
+            return dataclasses.replace(lost, tracking=dataclasses.replace(lost.tracking,
+                                                                          outcome=TrackOutcome.LOST))
+        if rep.outcome is TrackOutcome.DIRECT:
+            events.append("direct_fallback")
+            return _Step(self._on_keyframe(step.T_cam_world, last_kf, None), step.T_cam_world, rep)
+        if rep.outcome is TrackOutcome.TRACKED_BLURRED:
+            return _Step(self._on_keyframe(step.T_cam_world, last_kf, step.observations),
+                         step.T_cam_world, rep)
+        reason = self.mapping.keyframe_due(index, rep.n_inliers, tracks)
+        if reason is KeyframeReason.NONE:
+            return _Step(self._on_keyframe(step.T_cam_world, last_kf, step.observations),
+                         step.T_cam_world, rep)
+        T_cw, kf = self.mapping.add_keyframe(index, step.T_cam_world, img, tracks, reason)
+        self.tracker.motion.T_last = T_cw
+        self.tracker.detect(img, kf.kf_id)
+        self.mapping.seal_keyframe(kf.kf_id, img, tracks)
+        reading = self.scale.observe_keyframe(seg, kf.kf_id)
+        return _Step(self._on_keyframe(T_cw, kf.kf_id, None), T_cw, rep, None, kf, reading)
+
+    # ------------------------------------------------------------------ the end
+    def all_timings(self) -> dict[str, float]:
+        out = dict(self.timings)
+        for part in (self.tracker.timings, self.initializer.timings, self.mapping.all_timings(),
+                     self.scale.timings):
+            for k, v in part.items():
+                out[k] = out.get(k, 0.0) + v
+        return out
+
+    def finish(self) -> PipelineOutput:
+        """Compose the refined trajectory; every record gets its final status and pose."""
+        n = len(self.records)
+        if not self.cfg.track:
+            return PipelineOutput(tuple(self.records), np.zeros((0, 4, 4)),
+                                  np.zeros(0, dtype=np.int64), np.zeros((0, 3)), (), np.ones(n),
+                                  self.all_timings())
+        frame_scale = self.scale.frame_scales(n) if self.scale.active else None
+        composed = self.composer.finish(self.mapping.segments, frame_scale)
+        fs = frame_scale if frame_scale is not None else np.ones(n)
+        g_scale = float(np.median(fs)) if n else 1.0
+        pts = [sg.points_in_world(g_scale) for sg in self.mapping.segments]
+        records = tuple(
+            dataclasses.replace(r, status=composed.statuses[i],
+                                pose_refined=to_se3(composed.T_world_cam[i]),
+                                segment=self.composer.anchors[i].segment, scale_factor=float(fs[i]))
+            for i, r in enumerate(self.records))
+        kf_idx = np.array([i for i, r in enumerate(records) if r.is_keyframe], dtype=np.int64)
+        return PipelineOutput(records, composed.T_world_cam, kf_idx,
+                              np.vstack(pts) if pts else np.zeros((0, 3)),
+                              tuple(self.scale.readings), fs, self.all_timings())
+
+
+__all__ = ["Pipeline", "PipelineOutput", "blur_score"]
