@@ -20,11 +20,13 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from amrvio.config import PipelineConfig, without_photometric
 from amrvio.eval.evaluate import evaluate
 from amrvio.io.dataset import open_dataset
-from amrvio.pipeline.run import run_vo
+from amrvio.pipeline.pipeline import PipelineOutput
+from amrvio.pipeline.records import PoseStatus
+from amrvio.pipeline.run import run_pipeline
 from amrvio.pipeline.threads import limit_native_threads
-from amrvio.pipeline.vo import PoseStatus, VoConfig, VoOutput
 from amrvio.types.trajectory import Trajectory
 
 KITTI = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "kitti00_0000-0199"
@@ -35,7 +37,7 @@ def _row(name: str, value: float, unit: str, note: str) -> Row:
     return {"name": name, "value": float(value), "unit": unit, "note": note}
 
 
-def _eval(out: VoOutput, gt: Trajectory, align: str = "sim3") -> tuple[float, float, float]:
+def _eval(out: PipelineOutput, gt: Trajectory, align: str = "sim3") -> tuple[float, float, float]:
     est = Trajectory.from_matrices(out.stamps_ns * 1e-9, out.T_world_cam)
     r = evaluate(est, gt, align=align)
     return r.ate.rmse, r.path_length_m, float(r.scale if r.scale is not None else np.nan)
@@ -45,7 +47,7 @@ def _const(img: NDArray[np.uint8]) -> Callable[[], NDArray[np.uint8]]:
     return lambda: img
 
 
-def _timed_run(spec: str, cfg: VoConfig, repeats: int) -> tuple[VoOutput, float]:
+def _timed_run(spec: str, cfg: PipelineConfig, repeats: int) -> tuple[PipelineOutput, float]:
     ds = open_dataset(spec)
     # preload images so that fps measures the VO, not PNG decoding
     imgs = {f.index: f.load() for f in ds.frames}
@@ -55,15 +57,15 @@ def _timed_run(spec: str, cfg: VoConfig, repeats: int) -> tuple[VoOutput, float]
     times, out = [], None
     for _ in range(repeats):
         t0 = time.perf_counter()
-        out = run_vo(ds, cfg)
+        out = run_pipeline(ds, cfg)
         times.append(time.perf_counter() - t0)
     if out is None:
         raise ValueError("repeats must be >= 1")
     return out, statistics.median(times)
 
 
-def _stage_rows(prefix: str, out: VoOutput) -> list[Row]:
-    n = len(out.frames)
+def _stage_rows(prefix: str, out: PipelineOutput) -> list[Row]:
+    n = len(out.records)
     return [_row(f"{prefix} stage {k}", 1000.0 * v / n, "ms/frame", "mean over the sequence")
             for k, v in sorted(out.timings_s.items(), key=lambda kv: -kv[1])]
 
@@ -75,10 +77,10 @@ def _kitti(repeats: int) -> list[Row]:
     gt = open_dataset(f"kitti:{KITTI}").groundtruth
     if gt is None:
         raise RuntimeError(f"{KITTI} has no poses.txt")
-    out, dt = _timed_run(f"kitti:{KITTI}", VoConfig(), repeats)
+    out, dt = _timed_run(f"kitti:{KITTI}", PipelineConfig(), repeats)
     ate, length, scale = _eval(out, gt)
-    n = len(out.frames)
-    tracked = sum(f.status is PoseStatus.TRACKED for f in out.frames)
+    n = len(out.records)
+    tracked = sum(f.status is PoseStatus.TRACKED for f in out.records)
     rows += [
         _row("kitti00 0-199 frames with a pose", n, "frames", f"{tracked} tracked; ORB-SLAM3 199"),
         _row("kitti00 0-199 Sim3 ATE", ate, "m", "ORB-SLAM3 mono: 0.93 m"),
@@ -91,10 +93,11 @@ def _kitti(repeats: int) -> list[Row]:
     # end to end, as `amrvio run` does it: PNG decoding included
     ds_png = open_dataset(f"kitti:{KITTI}")
     t0 = time.perf_counter()
-    run_vo(ds_png, VoConfig())
+    run_pipeline(ds_png, PipelineConfig())
     rows.append(_row("kitti00 0-199 VO throughput, PNG decoding included", n /
                      (time.perf_counter() - t0), "frames/s", "1 run; ORB-SLAM3: ~34"))
-    cfg_h = VoConfig(camera_height_m=1.65)
+    base = PipelineConfig()
+    cfg_h = dataclasses.replace(base, scale=dataclasses.replace(base.scale, camera_height_m=1.65))
     out_h, _ = _timed_run(f"kitti:{KITTI}", cfg_h, 1)
     ate_h, length, s_h = _eval(out_h, gt)
     ate_se3, _, _ = _eval(out_h, gt, align="se3")
@@ -107,6 +110,12 @@ def _kitti(repeats: int) -> list[Row]:
     return rows
 
 
+def _ba_window(cfg: PipelineConfig, delta: int) -> PipelineConfig:
+    mp = cfg.mapping
+    return dataclasses.replace(cfg, mapping=dataclasses.replace(mp, mapper=dataclasses.replace(
+        mp.mapper, ba_window=mp.mapper.ba_window + delta)))
+
+
 def _kitti_sensitivity(quick: bool) -> list[Row]:
     """Sim3 ATE over nearby settings: the margin to ORB-SLAM3's 0.93 m must not be luck."""
     if not KITTI.is_dir():
@@ -114,15 +123,17 @@ def _kitti_sensitivity(quick: bool) -> list[Row]:
     gt = open_dataset(f"kitti:{KITTI}").groundtruth
     if gt is None:
         raise RuntimeError(f"{KITTI} has no poses.txt")
-    base = VoConfig()
+    base = PipelineConfig()
     settings = {
         "default": base,
         "features -20 %": dataclasses.replace(
-            base, klt=dataclasses.replace(base.klt, max_features=int(0.8 * base.klt.max_features))),
+            base, tracking=dataclasses.replace(base.tracking, klt=dataclasses.replace(
+                base.tracking.klt, max_features=int(0.8 * base.tracking.klt.max_features)))),
         "features +20 %": dataclasses.replace(
-            base, klt=dataclasses.replace(base.klt, max_features=int(1.2 * base.klt.max_features))),
-        "BA window -2": dataclasses.replace(base, ba_window=base.ba_window - 2),
-        "BA window +2": dataclasses.replace(base, ba_window=base.ba_window + 2),
+            base, tracking=dataclasses.replace(base.tracking, klt=dataclasses.replace(
+                base.tracking.klt, max_features=int(1.2 * base.tracking.klt.max_features)))),
+        "BA window -2": _ba_window(base, -2),
+        "BA window +2": _ba_window(base, +2),
     }
     if quick:
         settings = {k: v for k, v in settings.items() if k in ("default", "features -20 %")}
@@ -156,12 +167,10 @@ def _sim_sequence(tmp: Path, motion: str, seconds: float) -> Path:
 
 def _sim(repeats: int, seconds: float) -> list[Row]:
     rows: list[Row] = []
-    base = VoConfig()
+    base = PipelineConfig()
     variants = {
         "full": base,
-        "photometric compensation off": dataclasses.replace(
-            base, klt=dataclasses.replace(base.klt, photometric=False),
-            direct=dataclasses.replace(base.direct, estimate_affine=False)),
+        "photometric compensation off": without_photometric(base),
         "blur gating off": dataclasses.replace(base, blur_gating=False),
     }
     with tempfile.TemporaryDirectory() as td:
@@ -178,10 +187,10 @@ def _sim(repeats: int, seconds: float) -> list[Row]:
                     continue
                 out, dt = _timed_run(str(seq), cfg, repeats if name == "full" else 1)
                 ate, length, _ = _eval(out, gt_cam)
-                n = len(out.frames)
-                lost_events = sum(1 for _, e in out.events if e.startswith("lost"))
-                fallbacks = sum(1 for _, e in out.events if e == "direct_fallback")
-                not_tracked = sum(f.status is not PoseStatus.TRACKED for f in out.frames)
+                n = len(out.records)
+                lost_events = sum(1 for r in out.records for e in r.events if e.startswith("lost"))
+                fallbacks = sum(1 for r in out.records for e in r.events if e == "direct_fallback")
+                not_tracked = sum(f.status is not PoseStatus.TRACKED for f in out.records)
                 rows += [
                     _row(f"{tag} [{name}] Sim3 ATE / path", 100 * ate / length, "%",
                          f"{n} frames, path {length:.2f} m, 3 EV steps, 2 blur bursts; "

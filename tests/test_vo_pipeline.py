@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from skimage import data as skdata
 
-from amrvio.geometry._common import invert_T, rt_to_T, so3_exp_small
 from amrvio.config import PipelineConfig
+from amrvio.geometry._common import invert_T, rt_to_T, so3_exp_small
 from amrvio.pipeline.pipeline import Pipeline
 from amrvio.pipeline.records import PoseStatus
 
