@@ -21,6 +21,8 @@ lint: $(STAMP)
 	$(BIN)/ruff check amrvio tests bench examples
 	$(BIN)/mypy
 
+# -rs lists every skip with its reason; tests/skip_policy.py fails the run on a skip it does not allow.
+# Any non-zero pytest status fails make, including 5 (no test collected).
 test: lint
 	$(BIN)/python -m pytest -n 2 -rs tests
 
