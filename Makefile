@@ -21,8 +21,10 @@ lint: $(STAMP)
 	$(BIN)/ruff check amrvio tests bench examples
 	$(BIN)/mypy
 
+# -rfEs lists failures, errors and every skip with its reason; tests/skip_policy.py fails the run on a skip it does not allow.
+# Any non-zero pytest status fails make, including 5 (no test collected).
 test: lint
-	$(BIN)/python -m pytest -n 2 tests
+	$(BIN)/python -m pytest -n 2 -rfEs tests
 
 bench: $(STAMP)
 	$(BIN)/python -m bench.run --out bench/results

@@ -11,6 +11,7 @@ from amrvio.errors import CalibrationError
 from amrvio.io.dataset import detect_kind, open_dataset
 from amrvio.types.camera import RadTanCamera
 from amrvio.types.sensors import Frame, ImuSample
+from tests.skip_policy import skip_shared_missing
 
 pytestmark = pytest.mark.real_data
 
@@ -22,7 +23,7 @@ PHONE = "phone_handheld_blur_0450-0549"
 def _folder(shared_data: Path, name: str) -> Path:
     path = shared_data / name
     if not path.is_dir():
-        pytest.skip(f"{path} is absent")
+        skip_shared_missing(path)
     return path
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from amrvio.types.lie import quat_wxyz_to_matrix, so3_log
+from tests.skip_policy import skip_shared_missing
 
 pytestmark = pytest.mark.real_data
 
@@ -19,7 +20,7 @@ START_S, SECONDS = 40.0, 10.0
 def euroc(shared_data: Path) -> Path:
     mav = shared_data / SEQ / "mav0"
     if not (mav / "state_groundtruth_estimate0" / "data.csv").is_file():
-        pytest.skip(f"{mav} lacks state_groundtruth_estimate0/data.csv")
+        skip_shared_missing(mav / "state_groundtruth_estimate0" / "data.csv")
     return mav
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gtsam
 import numpy as np
 import pytest
 
@@ -75,7 +76,6 @@ def test_noise_free_imu_integrates_to_ground_truth_after_10s(kind: str) -> None:
 
 @pytest.mark.parametrize("kind", ["forward-stop-turn", "handheld", "rough-floor"])
 def test_gtsam_preintegration_predicts_ground_truth(kind: str) -> None:
-    gtsam = pytest.importorskip("gtsam")
     m = make_motion(kind, 4.0, CORRIDOR, seed=7)
     rate = 1000.0  # GTSAM holds each reading constant over dt (first order): use a dense stream
     syn = synthesize_imu(m, rate_hz=rate, noise=None)
