@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 from amrvio.errors import CalibrationError, DatasetFormatError, InputFileError
-from amrvio.io.dataset import Dataset, detect_kind, open_dataset, parse_spec, seconds_to_ns
+from amrvio.io.base import Dataset
+from amrvio.io.dataset import detect_kind, open_dataset, parse_spec
+from amrvio.io.table import seconds_to_ns
 from amrvio.types.lie import SE3, SO3
 from amrvio.types.sensors import Frame, ImuSample
 
@@ -180,7 +182,7 @@ def test_euroc_missing_images_skipped_with_one_counting_warning(
     data = root / "mav0" / "cam0" / "data"
     for k in (1, 4):
         (data / f"{T0 + k * FRAME_DT}.png").unlink()
-    with caplog.at_level(logging.WARNING, logger="amrvio.io.dataset"):
+    with caplog.at_level(logging.WARNING, logger="amrvio.io.base"):
         ds = open_dataset(f"euroc:{root}")
     assert [f.t_ns for f in ds.frames] == [T0 + k * FRAME_DT for k in (0, 2, 3, 5)]
     assert [f.index for f in ds.frames] == [0, 1, 2, 3]

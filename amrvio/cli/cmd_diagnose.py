@@ -43,6 +43,8 @@ def run(args: argparse.Namespace) -> int:
     from amrvio.diagnostics.exposure import ExposureConfig
     from amrvio.diagnostics.frame import DiagnosticsConfig, FrameDiagnostics, health_rows
     from amrvio.errors import ConfigError
+    from amrvio.imu.static import initial_standstill
+    from amrvio.imu.window import frame_imu_window
     from amrvio.io.dataset import open_dataset
 
     if not args.ev_step > 0 or not args.smear_bound_px > 0:
@@ -62,17 +64,8 @@ def run(args: argparse.Namespace) -> int:
             bias = None
         if bias is None or bias.shape != (3,):
             raise ConfigError(f"--gyro-bias must be auto, none or x,y,z; got {args.gyro_bias!r}")
-    elif args.gyro_bias == "auto" and ds.imu is not None and len(ds.imu) > 50:
-        first = ds.imu.window(int(ds.imu.stamps_ns[0]), int(ds.imu.stamps_ns[0]) + 1_000_000_000)
-        g, a = np.asarray(first.gyro_rad_s), np.asarray(first.accel_m_s2)
-        h = a.shape[0] // 2
-        d0, d1 = a[:h].mean(axis=0), a[h:].mean(axis=0)
-        cosang = float(d0 @ d1 / (np.linalg.norm(d0) * np.linalg.norm(d1)))
-        # Still (vibration allowed): gravity direction steady to 1 deg, |mean a| ~ g and a
-        # small mean rate. Then the mean gyro is its bias.
-        if (cosang > np.cos(np.radians(1.0)) and abs(np.linalg.norm(a.mean(axis=0)) - 9.81) < 0.3
-                and np.linalg.norm(g.mean(axis=0)) < 0.15):
-            bias = g.mean(axis=0)
+    elif args.gyro_bias == "auto" and ds.imu is not None:
+        bias = initial_standstill(ds.imu).gyro_bias_rad_s  # None unless the first second is still
     assumed_s: float | None = None
     notes: list[str] = []
     if ds.imu is not None and any(f.exposure_s is None for f in ds.frames):
@@ -101,8 +94,7 @@ def run(args: argparse.Namespace) -> int:
         imu_win = None
         if ds.imu is not None:
             T = fr.exposure_s or cfg.assumed_exposure_s or 0.0
-            t0 = (prev_t if prev_t is not None else fr.t_ns - 2_000_000_000) - 10_000_000
-            imu_win = ds.imu.window(t0, fr.t_ns + int(T * 0.5e9) + 10_000_000)
+            imu_win = frame_imu_window(ds.imu, fr.t_ns, prev_t, T)
         records.append(stage.process(fr.load(), fr.t_ns, imu_win, fr.exposure_s, fr.index))
         prev_t = fr.t_ns
     out: Path = args.out

@@ -19,24 +19,29 @@ from pathlib import Path
 import numpy as np
 
 from amrvio.errors import DatasetFormatError, TrajectoryFormatError
-from amrvio.io.dataset import (
+from amrvio.io.base import (
     Dataset,
+    first_image_shape,
+    read_imu_csv,
+    rethrow_as_dataset_error,
+    warn_missing_images,
+)
+from amrvio.io.calib_load import (
+    find_photometric,
+    load_checked_calibration,
+    read_imu_noise_file,
+    read_photometric,
+)
+from amrvio.io.table import (
     TextTable,
     check_columns,
     check_increasing,
-    find_photometric,
-    first_image_shape,
     float_columns,
     int_column,
-    load_checked_calibration,
-    read_imu_csv,
-    read_imu_noise_file,
-    read_photometric,
     read_table,
-    rethrow_as_dataset_error,
     seconds_column_ns,
-    warn_missing_images,
 )
+from amrvio.io.trajectory import read_euroc_csv
 from amrvio.types.sensors import Frame
 from amrvio.types.trajectory import Trajectory
 
@@ -101,8 +106,6 @@ def attach_exposures(times_path: Path, frames: tuple[Frame, ...]) -> tuple[Frame
 
 
 def _groundtruth(mav: Path) -> Trajectory | None:
-    from amrvio.io.trajectory import read_euroc_csv
-
     for sub in ("state_groundtruth_estimate0", "mocap0"):
         gt_path = mav / sub / "data.csv"
         if gt_path.is_file():

@@ -15,21 +15,20 @@ from __future__ import annotations
 from pathlib import Path
 
 from amrvio.errors import DatasetFormatError
-from amrvio.io.dataset import (
-    Dataset,
+from amrvio.io.base import Dataset, first_image_shape, read_imu_csv, warn_missing_images
+from amrvio.io.calib_load import (
+    find_photometric,
+    load_checked_calibration,
+    read_imu_noise_file,
+    read_photometric,
+)
+from amrvio.io.table import (
     TextTable,
     check_columns,
     check_increasing,
-    find_photometric,
-    first_image_shape,
     int_column,
-    load_checked_calibration,
-    read_imu_csv,
-    read_imu_noise_file,
-    read_photometric,
     read_table,
     seconds_column_ns,
-    warn_missing_images,
 )
 from amrvio.types.sensors import Frame
 

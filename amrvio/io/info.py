@@ -1,6 +1,6 @@
 """What a recording holds, as plain data: the library side of ``amrvio info``.
 
-:func:`dataset_summary` describes an opened :class:`~amrvio.io.dataset.Dataset` (frames, time span,
+:func:`dataset_summary` describes an opened :class:`~amrvio.io.base.Dataset` (frames, time span,
 frame rate, image size, camera, IMU, noise, ``T_body_cam``, ground truth, exposure and photometric
 files) as a JSON-ready dict. :func:`check_images` decodes every frame and checks that all have the
 size of the first one (the readers only decode the first image when opening).
@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import DatasetFormatError
-from amrvio.io.dataset import Dataset
+from amrvio.io.base import Dataset
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import SE3
 from amrvio.types.sensors import Frame

@@ -11,16 +11,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from amrvio.errors import DatasetFormatError, TrajectoryFormatError
-from amrvio.io.dataset import (
-    Dataset,
-    check_columns,
-    check_increasing,
-    first_image_shape,
-    load_checked_calibration,
-    read_table,
-    rethrow_as_dataset_error,
-    seconds_column_ns,
-)
+from amrvio.io.base import Dataset, first_image_shape, rethrow_as_dataset_error
+from amrvio.io.calib_load import load_checked_calibration
+from amrvio.io.table import check_columns, check_increasing, read_table, seconds_column_ns
+from amrvio.io.trajectory import read_kitti
 from amrvio.types.sensors import Frame
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".pgm", ".bmp", ".tif", ".tiff")
@@ -64,8 +58,6 @@ def read_kitti_odometry(path: Path, calib: Path | None = None) -> Dataset:
     groundtruth = None
     poses_path = find_poses(path)
     if poses_path is not None:
-        from amrvio.io.trajectory import read_kitti
-
         try:
             groundtruth = read_kitti(poses_path, stamps.astype(float) * 1e-9)
         except TrajectoryFormatError as err:

@@ -22,11 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import DatasetFormatError
-from amrvio.io.dataset import (
-    Dataset,
-    first_image_shape,
-    load_checked_calibration,
-)
+from amrvio.io.base import Dataset, first_image_shape, to_grey_u8
+from amrvio.io.calib_load import load_checked_calibration
 from amrvio.types.sensors import Frame, ImuData
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -96,8 +93,6 @@ def _listing(topics: dict[str, str]) -> str:
 def image_from_msg(msg: Any, msgtype: str, where: str) -> U8:
     """A sensor_msgs Image or CompressedImage as (H, W) uint8 grey."""
     import cv2
-
-    from amrvio.io.tum_mono import to_grey_u8
 
     if msgtype.endswith("CompressedImage"):
         data = np.asarray(msg.data, dtype=np.uint8)

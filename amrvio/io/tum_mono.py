@@ -16,17 +16,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import DatasetFormatError
-from amrvio.io.dataset import (
-    Dataset,
+from amrvio.io.base import Dataset, first_image_shape, to_grey_u8, warn_missing_images
+from amrvio.io.calib_load import load_checked_calibration, read_photometric
+from amrvio.io.table import (
     check_columns,
     check_increasing,
-    first_image_shape,
     float_columns,
-    load_checked_calibration,
-    read_photometric,
     read_table,
     seconds_column_ns,
-    warn_missing_images,
 )
 from amrvio.types.sensors import Frame
 
@@ -55,20 +52,6 @@ class ZipImage:
         if img is None:
             raise DatasetFormatError(where, "image cannot be decoded")
         return to_grey_u8(img, where)
-
-
-def to_grey_u8(img: NDArray[np.generic], where: str) -> U8:
-    """A decoded image (grey, BGR or BGRA; 8 or 16 bit) as (H, W) uint8 grey."""
-    import cv2
-
-    if img.ndim == 3:
-        code = cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY
-        img = cv2.cvtColor(img, code)
-    if img.dtype == np.uint16:
-        img = (img.astype(np.uint16) >> 8).astype(np.uint8)
-    if img.dtype != np.uint8 or img.ndim != 2:
-        raise DatasetFormatError(where, f"unsupported image format {img.dtype} {img.shape}")
-    return np.asarray(img, dtype=np.uint8)
 
 
 def _image_index(path: Path) -> tuple[dict[str, str], Path | None]:

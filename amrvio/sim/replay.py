@@ -5,7 +5,7 @@ pose; ``smoothing > 0`` uses a penalised smoothing spline, scipy ``make_smoothin
 Attitude: scipy ``RotationSpline`` (cubic in the rotation-vector increments, C2), whose first
 derivative is the body-frame angular rate. Motion time 0 is the source stamp ``t0_ns``.
 
-A recorded IMU CSV (EuRoC imu0 layout, read by amrvio.io.dataset.read_imu_csv) may replace the
+A recorded IMU CSV (EuRoC imu0 layout, read by amrvio.io.base.read_imu_csv) may replace the
 synthetic IMU.
 """
 

@@ -237,8 +237,8 @@ def _synthetic_sources(config: SimConfig, scene: Any, rngs: list[np.random.Gener
 
 
 def _replay_sources(config: SimConfig, rngs: list[np.random.Generator]) -> _Sources:
+    from amrvio.io.base import read_imu_csv
     from amrvio.io.calib import read_euroc_imu, read_euroc_sensor_T_BS
-    from amrvio.io.dataset import read_imu_csv
     from amrvio.sim.replay import load_groundtruth, make_replay_motion
 
     gt_path = Path(str(config.trajectory))

@@ -64,7 +64,8 @@ def test_replayed_groundtruth_matches_source_within_1mm(euroc: Path, replayed: P
 
 
 def test_recorded_imu_is_copied_and_frames_follow(euroc: Path, replayed: Path) -> None:
-    from amrvio.io.dataset import open_dataset, read_imu_csv
+    from amrvio.io.base import read_imu_csv
+    from amrvio.io.dataset import open_dataset
 
     src = read_imu_csv(euroc / "imu0" / "data.csv")
     ds = open_dataset(f"euroc:{replayed}")
@@ -82,7 +83,7 @@ def test_recorded_imu_is_copied_and_frames_follow(euroc: Path, replayed: Path) -
 def test_replay_spline_derivatives_agree_with_the_recorded_imu(euroc: Path) -> None:
     """The spline's exact angular rate / specific force match the real ADIS16448 after a 0.1 s
     low-pass (the 20 Hz ground truth cannot hold the MAV's vibration)."""
-    from amrvio.io.dataset import read_imu_csv
+    from amrvio.io.base import read_imu_csv
     from amrvio.sim.imu_synth import ideal_imu
     from amrvio.sim.replay import load_groundtruth, make_replay_motion
 
