@@ -8,7 +8,7 @@ import pytest
 from skimage import data as skdata
 
 from amrvio.frontend.klt import KltConfig, KltTracker, detect_bucketed
-from amrvio.frontend.photometric_comp import (
+from amrvio.tracking.brightness import (
     AffineBrightness,
     fit_affine_quantiles,
 )
