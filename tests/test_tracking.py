@@ -84,7 +84,7 @@ def test_detector_empty_and_flat_images() -> None:
     assert detect_corners(_img(), DetectorConfig(), n_wanted=0).shape == (0, 2)
     assert detect_corners(np.full((64, 64), 90, np.uint8), DetectorConfig()).shape == (0, 2)
     with pytest.raises(ShapeError):
-        detect_corners(np.zeros((64, 64), np.float32), DetectorConfig())  # type: ignore[arg-type]
+        detect_corners(np.zeros((64, 64), np.float32), DetectorConfig())
 
 
 # ---- tracker ----------------------------------------------------------------------------------
@@ -230,7 +230,7 @@ def test_tracker_bad_and_empty_input() -> None:
     with pytest.raises(ShapeError):
         lk.track(img, img, np.zeros((5, 2)), pts_pred=np.zeros((4, 2)))
     with pytest.raises(ShapeError):
-        lk.prepare(img.astype(np.float32))  # type: ignore[arg-type]
+        lk.prepare(img.astype(np.float32))
 
 
 def test_tracking_is_deterministic() -> None:
