@@ -3,7 +3,7 @@
 Times are CPU seconds of this process (time.process_time, OpenCV on one thread), so the figures
 do not depend on the load of a shared machine.
 
-- ``blur+exposure``: per frame, the scene-normalised blur score (Var of the 3x3 Laplacian,
+- ``blur+exposure``: per frame, the scene-normalised blur score (``blur_score``: Var of the 3x3 Laplacian over Var(I),
   evaluated on every 2nd row/column of the full-resolution Laplacian) and the exposure change to
   the previous frame (contrast-normalised image, pyramidal KLT (3 levels, 11 px window) of up to 100
   tracks, robust affine fit on 7x7 patches of the 9x9 box-filtered frames; features re-detected
@@ -24,18 +24,19 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from amrvio.diagnostics.blur import BlurScorer, var_laplacian
+from amrvio.diagnostics.blur import BlurScorer, blur_score
 from amrvio.diagnostics.exposure import (
     ExposureConfig,
-    TrackerConfig,
-    detect_features,
+    ExposureFrame,
+    TrackingConfig,
     detection_mask,
     fit_exposure_frames,
-    normalise_for_tracking,
     prepare_exposure_frame,
-    track_features,
 )
 from amrvio.diagnostics.frame import FrameDiagnostics
+from amrvio.diagnostics.parallax import ParallaxReferenceConfig
+from amrvio.tracking.detect import detect_corners
+from amrvio.tracking.lk import LkTracker, TrackImage
 from amrvio.types.camera import PinholeCamera
 
 W, H = 752, 480
@@ -56,24 +57,25 @@ def _frames(n: int) -> list[NDArray[np.uint8]]:
 
 
 def _blur_exposure_ms(frames: list[NDArray[np.uint8]]) -> float:
-    tcfg, ecfg = TrackerConfig(), ExposureConfig()
+    tcfg, ecfg = TrackingConfig(), ExposureConfig()
+    min_tracks = ParallaxReferenceConfig().min_tracks
+    tracker = LkTracker(tcfg.lk)
     scorer = BlurScorer()
     t0 = time.process_time()
-    prev = prev_norm = None
-    pts = np.zeros((0, 2), np.float32)
+    prev: ExposureFrame | None = None
+    prev_t: TrackImage | None = None
+    pts = np.zeros((0, 2))
     for img in frames:
-        score = var_laplacian(img, step=2)
-        _, std = cv2.meanStdDev(img)
-        scorer.update(score / max(float(std[0, 0]) ** 2, 1e-6))
-        norm = normalise_for_tracking(img)
+        scorer.update(blur_score(img))
+        cur = tracker.prepare(img)
         ef = prepare_exposure_frame(img, ecfg)
-        if prev is not None and prev_norm is not None:
-            p1, ok = track_features(prev_norm, norm, pts, tcfg)
-            fit_exposure_frames(prev, ef, pts[ok], p1[ok], ecfg)
-            pts = p1[ok]
-        if pts.shape[0] < tcfg.min_tracks:
-            pts = detect_features(norm, tcfg, mask=detection_mask(ef))
-        prev, prev_norm = ef, norm
+        if prev is not None and prev_t is not None:
+            res = tracker.track(prev_t, cur, pts)
+            fit_exposure_frames(prev, ef, pts[res.ok], res.pts[res.ok], ecfg)
+            pts = res.pts[res.ok]
+        if pts.shape[0] < min_tracks:
+            pts = detect_corners(cur.lk, tcfg.detector, mask=detection_mask(ef))
+        prev, prev_t = ef, cur
     return (time.process_time() - t0) * 1e3 / len(frames)
 
 
@@ -115,8 +117,8 @@ def _accuracy_on_simulator() -> list[dict[str, object]]:
             h = stage.process(f.load(), f.t_ns, win, f.exposure_s)
             prev = f.t_ns
             # turn in place (t >= 4 s): rotation only, what a gyro can predict
-            if h.smear_px_pred is not None and tr.smear_px_max > 2.0 and tr.t_ns >= 5_000_000_000:
-                err.append(abs(h.smear_px_pred / tr.smear_px_max - 1.0))
+            if h.blur.smear_px_pred is not None and tr.smear_px_max > 2.0 and tr.t_ns >= 5_000_000_000:
+                err.append(abs(h.blur.smear_px_pred / tr.smear_px_max - 1.0))
         note = (f"{len(err)} frames with true smear > 2 px while turning in place, corridor "
                 "376x240, IMU noise on; true smear from sim_frames.csv")
         rows.append({"name": "gyro smear vs simulator truth, median |error|",
@@ -154,7 +156,7 @@ def run(quick: bool) -> list[dict[str, object]]:
     frames = _frames(n)
     be = float(np.median([_blur_exposure_ms(frames) for _ in range(repeats)]))
     blur = float(np.median([
-        (lambda t0: (sum(var_laplacian(f, step=2) for f in frames), time.process_time() - t0)[1])(
+        (lambda t0: (sum(blur_score(f) for f in frames), time.process_time() - t0)[1])(
             time.process_time()) * 1e3 / n for _ in range(repeats)
     ]))
     st = float(np.median([_stage_ms(frames) for _ in range(repeats)]))

@@ -12,6 +12,7 @@ import pytest
 from amrvio.diagnostics.advice import make_advice
 from amrvio.diagnostics.frame import HEALTH_COLUMNS, FrameDiagnostics, health_rows
 from amrvio.errors import ShapeError
+from amrvio.sim.simulate import SimConfig, simulate
 from amrvio.types.camera import PinholeCamera
 
 
@@ -38,13 +39,13 @@ def _sequence(n: int = 12, step_at: int = 6, ev: float = 1.0) -> list[np.ndarray
 def test_stage_flags_exposure_step_only_there_and_reports_rows() -> None:
     stage = FrameDiagnostics(camera=PinholeCamera(320, 240, 300.0, 300.0, 159.5, 119.5))
     recs = [stage.process(f, (i + 1) * 50_000_000) for i, f in enumerate(_sequence())]
-    flags = [r.exposure_flag for r in recs]
+    flags = [r.exposure.flag for r in recs]
     assert flags == [i == 6 for i in range(12)]
-    assert recs[6].exposure_ev == pytest.approx(1.0, abs=0.1)
-    assert recs[0].keyframe and recs[0].exposure_method == ""
-    assert all(r.exposure_method == "klt" for r in recs[1:])
-    assert not any(r.blur_flag for r in recs)
-    assert all(r.smear_px_pred is None and r.excitation is None for r in recs)
+    assert recs[6].exposure.ev == pytest.approx(1.0, abs=0.1)
+    assert recs[0].parallax.new_reference and recs[0].exposure.method == ""
+    assert all(r.exposure.method == "klt" for r in recs[1:])
+    assert not any(r.blur.flag for r in recs)
+    assert all(r.blur.smear_px_pred is None and r.excitation is None for r in recs)
     cols, rows = health_rows(recs)
     assert cols == list(HEALTH_COLUMNS)
     assert rows[3]["smear_px_pred"] == "" and rows[6]["exposure_flag"] == "1"
@@ -57,7 +58,7 @@ def test_stage_flags_blurred_frame() -> None:
     frames[8] = cv2.blur(frames[8], (9, 1))
     stage = FrameDiagnostics()
     recs = [stage.process(f, (i + 1) * 50_000_000) for i, f in enumerate(frames)]
-    assert [r.blur_flag for r in recs] == [i == 8 for i in range(12)]
+    assert [r.blur.flag for r in recs] == [i == 8 for i in range(12)]
     assert any(a.startswith("frames 8-8: motion blur") for a in make_advice(recs))
 
 
@@ -73,11 +74,10 @@ def test_stage_bad_input() -> None:
 
 
 def test_cli_diagnose_on_simulated_sequence(tmp_path: Path) -> None:
-    simulate_mod = pytest.importorskip("amrvio.sim.simulate")
     from amrvio.cli.main import main
 
     seq = tmp_path / "seq"
-    simulate_mod.simulate(simulate_mod.SimConfig(
+    simulate(SimConfig(
         scene="corridor", motion="forward-stop-turn", seconds=3.0, fps=10, width=320, height=240,
         ev_steps="2.0:+1", blur_bursts="1.0:0.6:6.0", exposure_ms=10.0), seq)
     out = tmp_path / "out"

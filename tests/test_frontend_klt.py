@@ -8,11 +8,11 @@ import pytest
 from skimage import data as skdata
 
 from amrvio.frontend.klt import KltConfig, KltTracker, detect_bucketed
-from amrvio.frontend.photometric_comp import (
+from amrvio.photometric.affine import fit_affine_robust
+from amrvio.tracking.brightness import (
     AffineBrightness,
     fit_affine_quantiles,
 )
-from amrvio.photometric.affine import fit_affine_robust
 
 
 def _img() -> np.ndarray:

@@ -7,6 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import amrvio.sim.image_formation as sim_if
+import amrvio.sim.render as sim_render
+import amrvio.sim.scene as sim_scene
 from amrvio.errors import ShapeError
 from amrvio.photometric.calibrate import (
     CalibrationStatus,
@@ -102,9 +105,6 @@ def test_too_few_observations_is_a_typed_result() -> None:
 
 
 def test_calibration_from_simulated_frames_meets_accuracy() -> None:
-    sim_if = pytest.importorskip("amrvio.sim.image_formation")
-    sim_render = pytest.importorskip("amrvio.sim.render")
-    sim_scene = pytest.importorskip("amrvio.sim.scene")
     W, H = 376, 240
     cam = PinholeCamera(W, H, 0.61 * W, 0.61 * W, (W - 1) / 2, (H - 1) / 2)
     renderer = sim_render.SceneRenderer(sim_scene.make_scene("room", 0), cam)

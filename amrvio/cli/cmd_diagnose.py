@@ -112,9 +112,9 @@ def run(args: argparse.Namespace) -> int:
         plot_health(records, out / "health.png", title=str(ds.root.name))
     if args.estimate_photometric > 0:
         _estimate_photometric(ds, frames, args.estimate_photometric, out, not args.no_plots)
-    n_blur = sum(r.blur_flag for r in records)
-    n_expo = sum(r.exposure_flag for r in records)
-    n_par = sum(r.low_parallax_flag for r in records)
+    n_blur = sum(r.blur.flag for r in records)
+    n_expo = sum(r.exposure.flag for r in records)
+    n_par = sum(r.parallax.low_flag for r in records)
     print(f"{len(records)} frames: {n_blur} blurred, {n_expo} exposure steps, "
           f"{n_par} low-parallax; wrote {out / 'health.csv'}, {out / 'advice.txt'}")
     return 0

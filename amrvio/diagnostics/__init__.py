@@ -3,8 +3,10 @@
 - :mod:`~amrvio.diagnostics.blur`: variance of the Laplacian and the scene-normalised BlurScorer;
 - :mod:`~amrvio.diagnostics.smear`: gyro-predicted smear field over the exposure, exposure advice;
 - :mod:`~amrvio.diagnostics.exposure`: exposure change (affine gain/offset, EV) on KLT patches;
-- :mod:`~amrvio.diagnostics.parallax`: rotation-compensated parallax against a keyframe;
+- :mod:`~amrvio.diagnostics.parallax`: rotation-compensated parallax against the parallax reference
+  frame, and the rule that renews that reference;
 - :mod:`~amrvio.diagnostics.excitation`: IMU excitation over a window (degenerate motion);
 - :mod:`~amrvio.diagnostics.frame`: the stage ``FrameDiagnostics(config).process(...) -> FrameHealth``;
+- :mod:`~amrvio.diagnostics.health`: the ``FrameHealth`` record and its ``health.csv`` rows;
 - :mod:`~amrvio.diagnostics.advice`: frame ranges with a cause and a recommendation.
 """

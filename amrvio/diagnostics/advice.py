@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 
-from amrvio.diagnostics.frame import FrameHealth
+from amrvio.diagnostics.health import FrameHealth
 
 
 def _ranges(flags: Sequence[bool], max_gap: int = 2) -> list[tuple[int, int]]:
@@ -38,9 +38,9 @@ def make_advice(records: Sequence[FrameHealth], smear_bound_px: float = 2.0) -> 
             found.append((i0, f"frames {seg[0].frame}-{seg[-1].frame}: {text(seg)}"))
 
     def blur_text(seg: list[FrameHealth]) -> str:
-        smear = _max([r.smear_px_pred for r in seg])
-        caps = [r.max_exposure_s for r in seg if r.max_exposure_s is not None]
-        ratio = min(r.blur_ratio for r in seg)
+        smear = _max([r.blur.smear_px_pred for r in seg])
+        caps = [r.blur.max_exposure_s for r in seg if r.blur.max_exposure_s is not None]
+        ratio = min(r.blur.ratio for r in seg)
         if math.isfinite(smear) and caps:
             return (
                 f"predicted smear {smear:.0f} px, cap exposure at {min(caps) * 1e3:.1f} ms "
@@ -52,7 +52,7 @@ def make_advice(records: Sequence[FrameHealth], smear_bound_px: float = 2.0) -> 
         )
 
     def expo_text(seg: list[FrameHealth]) -> str:
-        ev = max((r.exposure_ev for r in seg if math.isfinite(r.exposure_ev)), key=abs, default=0.0)
+        ev = max((r.exposure.ev for r in seg if math.isfinite(r.exposure.ev)), key=abs, default=0.0)
         return (
             f"exposure step {ev:+.2f} EV: use affine brightness compensation (gain/offset) or a "
             "photometric calibration; limit the auto-exposure rate"
@@ -60,13 +60,13 @@ def make_advice(records: Sequence[FrameHealth], smear_bound_px: float = 2.0) -> 
 
     def sat_text(seg: list[FrameHealth]) -> str:
         return (
-            f"{max(r.saturated_frac for r in seg) * 100:.0f} % of pixels saturated: lower the "
+            f"{max(r.exposure.saturated_frac for r in seg) * 100:.0f} % of pixels saturated: lower the "
             "exposure/gain target"
         )
 
     def par_text(seg: list[FrameHealth]) -> str:
         return (
-            f"low parallax (median {_max([r.parallax_px for r in seg]):.1f} px since keyframe): "
+            f"low parallax (median {_max([r.parallax.px for r in seg]):.1f} px since keyframe): "
             "do not initialise here; add lateral motion or turns, or use a metric cue (IMU, wheels)"
         )
 
@@ -76,10 +76,10 @@ def make_advice(records: Sequence[FrameHealth], smear_bound_px: float = 2.0) -> 
             "add a forward-stop-turn manoeuvre before VIO initialisation"
         )
 
-    add(lambda r: r.blur_flag, blur_text)
-    add(lambda r: r.exposure_flag, expo_text)
-    add(lambda r: r.saturated_frac > 0.1, sat_text)
-    add(lambda r: r.low_parallax_flag, par_text)
+    add(lambda r: r.blur.flag, blur_text)
+    add(lambda r: r.exposure.flag, expo_text)
+    add(lambda r: r.exposure.saturated_frac > 0.1, sat_text)
+    add(lambda r: r.parallax.low_flag, par_text)
     add(lambda r: r.excitation is not None and r.excitation.degenerate, exc_text)
     out = [text for _, text in sorted(found, key=lambda x: x[0])]  # by first frame
     if not out:

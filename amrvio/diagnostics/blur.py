@@ -1,9 +1,11 @@
 """Image blur score: variance of the Laplacian, normalised by recent sharp frames.
 
-``var_laplacian`` is the focus measure of seed section 5, ``s = Var(Delta I)``. Its absolute value
-depends on the scene (texture, contrast), so :class:`BlurScorer` divides it by the running median
-of the recent frames that were judged sharp: ``ratio ~= 1`` for a typical sharp frame and one
-threshold (default 0.5) works across scenes.
+``var_laplacian`` is the focus measure of seed section 5, ``s = Var(Delta I)``. :func:`blur_score`,
+the one score the VO and the diagnostics use, divides it by the image variance, so that an
+affine brightness (exposure) change does not read as blur. Its absolute value still depends on
+the scene (texture), so :class:`BlurScorer` divides it by the running median of the recent frames
+that were judged sharp: ``ratio ~= 1`` for a typical sharp frame and one threshold (default 0.5)
+works across scenes.
 """
 
 from __future__ import annotations
@@ -44,6 +46,14 @@ def var_laplacian(image: NDArray[np.generic], step: int = 1) -> float:
     return float(std[0, 0]) ** 2
 
 
+def blur_score(image: NDArray[np.generic]) -> float:
+    """Contrast-normalised focus measure of an (H, W) grey image:
+    ``Var(Delta I) / max(Var(I), 1)``, both on every second row and column (the Laplacian at full
+    resolution). Invariant to an affine brightness change (both variances scale by a^2)."""
+    img = np.asarray(image)
+    return var_laplacian(img, step=2) / max(float(np.var(img[::2, ::2])), 1.0)
+
+
 @dataclass(frozen=True, slots=True)
 class BlurResult:
     """Blur verdict of one frame.
@@ -63,12 +73,13 @@ class BlurScorerConfig:
     """``window``: how many recent sharp scores the median uses. ``blur_ratio``: a frame with
     ``ratio < blur_ratio`` is blurred. ``sharp_ratio``: frames with ``ratio >= sharp_ratio`` join the
     reference window. ``reset_after``: after this many consecutive non-sharp frames the reference is
-    reset (the scene itself got less textured)."""
+    reset (the scene itself got less textured). The short window and reset: sustained motion blur
+    becomes the new normal after 10 frames."""
 
-    window: int = 15
+    window: int = 10
     blur_ratio: float = 0.5
     sharp_ratio: float = 0.7
-    reset_after: int = 30
+    reset_after: int = 10
 
 
 class BlurScorer:

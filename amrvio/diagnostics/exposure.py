@@ -22,7 +22,7 @@ Fits whose gain is beyond +-``max_abs_ev`` are implausible (tracking failure): `
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -37,23 +37,31 @@ from amrvio.photometric.affine import (
     fit_affine_robust,
     linearise,
 )
+from amrvio.tracking.brightness import Invariance
+from amrvio.tracking.detect import DetectorConfig, detect_corners
+from amrvio.tracking.lk import LkConfig, LkTracker
 
 F32 = NDArray[np.float32]
 U8 = NDArray[np.uint8]
 
 
-@dataclass(frozen=True, slots=True)
-class TrackerConfig:
-    """KLT settings. ``max_corners`` features (``min_distance`` px apart) are detected when fewer
-    than ``min_tracks`` survive; pyramidal LK with ``win`` px windows and ``levels`` levels."""
+def _detector() -> DetectorConfig:
+    return DetectorConfig(max_corners=100, quality_level=0.01, min_distance_px=12, block_size=5)
 
-    max_corners: int = 100
-    min_tracks: int = 40
-    quality: float = 0.01
-    min_distance: int = 12
-    win: int = 11
-    levels: int = 3
-    max_error: float = 30.0
+
+def _lk() -> LkConfig:
+    return LkConfig(invariance=Invariance.NORMALISE, win_size=11, pyr_levels=3, max_iterations=20,
+                    epsilon=0.03, fb_thresh_px=None, max_error=30.0, border_px=0.0, epipolar=None)
+
+
+@dataclass(frozen=True, slots=True)
+class TrackingConfig:
+    """Feature tracking for the exposure fit (and the parallax): ``detector`` (100 Shi-Tomasi
+    corners, 12 px apart) and ``lk`` (normalised images, so that the tracker is not fooled by the
+    exposure change it measures; 11 px windows, 3 levels, LK residual below 30)."""
+
+    detector: DetectorConfig = field(default_factory=_detector)
+    lk: LkConfig = field(default_factory=_lk)
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,51 +109,6 @@ class ExposureChange:
 def _check_grey(img: NDArray[np.generic], name: str) -> None:
     if img.ndim != 2 or img.shape[0] < 8 or img.shape[1] < 8:
         raise ShapeError(f"{name} must be a (H,W) grey image of at least 8x8, got {img.shape}")
-
-
-def normalise_for_tracking(image: U8) -> U8:
-    """(H, W) uint8 -> uint8 ``128 + 40 (I - mean) / std``: invariant to affine brightness."""
-    img = np.asarray(image)
-    _check_grey(img, "image")
-    mean, std = cv2.meanStdDev(img)
-    s = max(float(std[0, 0]), 1e-3)
-    alpha = 40.0 / s
-    beta = 128.0 - alpha * float(mean[0, 0])
-    # addWeighted saturates to 0..255 (no abs, unlike convertScaleAbs).
-    out: U8 = cv2.addWeighted(img, alpha, img, 0.0, beta, dtype=cv2.CV_8U)
-    return out
-
-
-def detect_features(norm: U8, cfg: TrackerConfig, mask: U8 | None = None) -> F32:
-    """Shi-Tomasi corners on a normalised image -> (N, 2) float32 pixel coordinates."""
-    pts = cv2.goodFeaturesToTrack(
-        norm, cfg.max_corners, cfg.quality, cfg.min_distance, mask=mask, blockSize=5
-    )
-    if pts is None:
-        return np.zeros((0, 2), np.float32)
-    return np.asarray(pts.reshape(-1, 2), dtype=np.float32)
-
-
-def track_features(prev_norm: U8, cur_norm: U8, pts: F32, cfg: TrackerConfig) -> tuple[
-    F32, NDArray[np.bool_]
-]:
-    """Pyramidal LK from ``prev_norm`` to ``cur_norm`` -> (new (N, 2), ok (N,))."""
-    if pts.shape[0] == 0:
-        return pts.copy(), np.zeros(0, dtype=bool)
-    p1, st, err = cv2.calcOpticalFlowPyrLK(
-        prev_norm,
-        cur_norm,
-        pts.reshape(-1, 1, 2),
-        None,
-        winSize=(cfg.win, cfg.win),
-        maxLevel=cfg.levels,
-        criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 0.03),
-    )
-    p1 = p1.reshape(-1, 2)
-    h, w = cur_norm.shape
-    ok = (st.ravel() == 1) & (err.ravel() < cfg.max_error)
-    ok &= (p1[:, 0] >= 0) & (p1[:, 0] <= w - 1) & (p1[:, 1] >= 0) & (p1[:, 1] <= h - 1)
-    return np.asarray(p1, dtype=np.float32), ok
 
 
 def sample_patches(image: NDArray[np.generic], pts: NDArray[np.floating], radius: int) -> F32:
@@ -205,6 +168,18 @@ def detection_mask(frame: ExposureFrame) -> U8 | None:
     if float(ok.mean()) < 0.25:
         return None
     return np.asarray(ok, np.uint8) * np.uint8(255)
+
+
+def tracker_mask(mask: U8 | None, shape_hw: tuple[int, int], levels: int) -> U8 | None:
+    """A full-resolution detection mask reduced to a tracking image ``levels`` pyramid levels
+    down, of shape ``shape_hw`` (every second row and column per level); None if it won't fit."""
+    for _ in range(levels):
+        mask = None if mask is None else np.asarray(mask[::2, ::2])
+    if mask is not None and mask.shape != shape_hw:
+        mask = np.ascontiguousarray(mask[: shape_hw[0], : shape_hw[1]])
+        if mask.shape != shape_hw:
+            mask = None
+    return mask
 
 
 def fit_exposure_frames(
@@ -351,7 +326,7 @@ def estimate_exposure_change(
     prev: U8,
     cur: U8,
     cfg: ExposureConfig | None = None,
-    tracker: TrackerConfig | None = None,
+    tracking: TrackingConfig | None = None,
     inverse_response: NDArray[np.floating] | None = None,
 ) -> ExposureChange:
     """Stand-alone exposure change between two grey frames: KLT patches, else same pixels.
@@ -359,17 +334,20 @@ def estimate_exposure_change(
     (``FrameDiagnostics`` keeps the tracks between frames instead of detecting every time.)
     """
     cfg = cfg or ExposureConfig()
-    tracker = tracker or TrackerConfig()
+    tracking = tracking or TrackingConfig()
     p, c = np.asarray(prev), np.asarray(cur)
     _check_grey(p, "prev")
     _check_grey(c, "cur")
     if p.shape != c.shape:
         raise ShapeError(f"images differ in shape: {p.shape} vs {c.shape}")
-    n0, n1 = normalise_for_tracking(p), normalise_for_tracking(c)
+    tracker = LkTracker(tracking.lk)
+    t0, t1 = tracker.prepare(p), tracker.prepare(c)
     f0 = prepare_exposure_frame(p, cfg, inverse_response)
-    pts0 = detect_features(n0, tracker, mask=detection_mask(f0))
-    pts1, ok = track_features(n0, n1, pts0, tracker)
-    if int(ok.sum()) >= cfg.min_tracks:
+    mask = detection_mask(f0)
+    pts0 = detect_corners(t0.lk, tracking.detector, mask=tracker_mask(mask, t0.lk.shape, t0.levels))
+    pts0 = pts0 * t0.scale
+    res = tracker.track(t0, t1, pts0)
+    if int(res.ok.sum()) >= cfg.min_tracks:
         f1 = prepare_exposure_frame(c, cfg, inverse_response)
-        return fit_exposure_frames(f0, f1, pts0[ok], pts1[ok], cfg)
+        return fit_exposure_frames(f0, f1, pts0[res.ok], res.pts[res.ok], cfg)
     return fit_exposure_same_pixel(p, c, cfg, inverse_response)

@@ -113,3 +113,81 @@ def rotation_compensated_parallax(
         if not np.isfinite(med) or raw < med:
             return ParallaxResult(raw, int(pk.shape[0]), RotationSource.NONE, np.eye(3))
     return ParallaxResult(med, int(pk.shape[0]), source, R)
+
+
+# ---- the parallax reference frame (not the VO's keyframes: see frontend.keyframe_policy) -------
+
+@dataclass(frozen=True, slots=True)
+class ParallaxReferenceConfig:
+    """When the diagnostics renew the frame parallax is measured against, and flag low parallax.
+
+    A new reference starts when fewer than ``min_tracks`` tracks survive, fewer than
+    ``min_track_frac`` of the reference's own, or the parallax exceeds ``max_parallax_px``.
+    Parallax below ``low_parallax_px``, at least ``min_frames_low_parallax`` frames after the
+    reference, is flagged as low.
+    """
+
+    min_tracks: int = 40
+    min_track_frac: float = 0.5
+    max_parallax_px: float = 30.0
+    low_parallax_px: float = 5.0
+    min_frames_low_parallax: int = 10
+
+
+def parallax_reference_due(
+    n_tracked: int, n_reference: int, parallax_px: float, config: ParallaxReferenceConfig
+) -> bool:
+    """True when the parallax reference should be renewed (see :class:`ParallaxReferenceConfig`):
+    ``n_tracked`` tracks survive of the reference's ``n_reference``; NaN parallax never renews."""
+    return bool(
+        n_tracked < config.min_tracks
+        or n_tracked < config.min_track_frac * n_reference
+        or (np.isfinite(parallax_px) and parallax_px > config.max_parallax_px)
+    )
+
+
+def low_parallax(frames_since_reference: int, parallax_px: float,
+                 config: ParallaxReferenceConfig) -> bool:
+    """Low-parallax flag: parallax below ``low_parallax_px`` after enough frames."""
+    return bool(
+        frames_since_reference >= config.min_frames_low_parallax
+        and np.isfinite(parallax_px)
+        and parallax_px < config.low_parallax_px
+    )
+
+
+class ParallaxReference:
+    """The reference frame's tracks: ``pts_ref`` (N, 2) float32 where they were detected,
+    ``pts`` (N, 2) float32 where they are now, ``n_detected`` at the reference,
+    ``R_ref_cur`` the gyro rotation since the reference (valid while ``gyro_ok``) and
+    ``frames_since`` the reference. Changed only by :meth:`restart`, :meth:`rotate` and
+    :meth:`advance`."""
+
+    def __init__(self) -> None:
+        self.restart(np.zeros((0, 2), np.float32))
+
+    def restart(self, pts: NDArray[np.float32]) -> None:
+        """Make the current frame the reference, with (N, 2) detected ``pts``."""
+        self.pts = pts
+        self.pts_ref = pts.copy()
+        self.n_detected = int(pts.shape[0])
+        self.R_ref_cur = np.eye(3)
+        self.gyro_ok = True
+        self.frames_since = 0
+
+    def rotate(self, R_prev_cur: F64 | None) -> None:
+        """Accumulate the gyro rotation prev -> cur; None (no gyro) invalidates it."""
+        if R_prev_cur is None:
+            self.gyro_ok = False
+        else:
+            self.R_ref_cur = self.R_ref_cur @ R_prev_cur
+
+    def advance(self, pts_cur: NDArray[np.float32], ok: NDArray[np.bool_]) -> None:
+        """Keep the tracks with ``ok`` (N,), now at ``pts_cur`` (N, 2), and count the frame."""
+        self.pts, self.pts_ref = pts_cur[ok], self.pts_ref[ok]
+        self.frames_since += 1
+
+    def measure(self, camera: CameraModel) -> ParallaxResult:
+        """Rotation-compensated parallax of the surviving tracks since the reference."""
+        R_cur_ref = self.R_ref_cur.T if self.gyro_ok else None
+        return rotation_compensated_parallax(camera, self.pts_ref, self.pts, R_cur_ref)

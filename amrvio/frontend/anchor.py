@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
-from amrvio.frontend.photometric_comp import affine_from_quantiles, image_quantiles
+from amrvio.tracking.brightness import affine_from_quantiles, image_quantiles
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]

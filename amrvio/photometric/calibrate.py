@@ -27,6 +27,9 @@ from scipy.optimize import least_squares
 
 from amrvio.errors import ShapeError
 from amrvio.photometric.model import MonotoneResponse, RadialVignette, bernstein_basis
+from amrvio.tracking.brightness import Invariance
+from amrvio.tracking.detect import DetectorConfig, detect_corners
+from amrvio.tracking.lk import LkConfig, LkTracker, TrackImage
 
 F64 = NDArray[np.float64]
 
@@ -188,42 +191,33 @@ def track_observations(
     Points lost are replaced by new detections (new point ids). Low-gradient points are preferred
     (minimum-eigenvalue corners at a low quality level, then sorted by the local gradient) because
     their intensity is insensitive to sub-pixel tracking error."""
-    from amrvio.diagnostics.exposure import normalise_for_tracking
-
     if not images:
         raise ShapeError("track_observations needs at least one image")
     h, w = images[0].shape
+    tracker = LkTracker(LkConfig(invariance=Invariance.NORMALISE, win_size=win, pyr_levels=3,
+                                 fb_thresh_px=None, border_px=2.0, epipolar=None))
+    detector = DetectorConfig(max_corners=max_points, quality_level=0.005,
+                              min_distance_px=min_distance, block_size=7)
     frames: list[NDArray[np.int64]] = []
     points: list[NDArray[np.int64]] = []
     uvs: list[F64] = []
     vals: list[F64] = []
     next_id = 0
-    prev_norm = None
+    prev: TrackImage | None = None
     pts = np.zeros((0, 2), np.float32)
     ids = np.zeros(0, np.int64)
     k = np.ones((2 * patch_radius + 1,) * 2, np.float32) / float((2 * patch_radius + 1) ** 2)
     for i, img in enumerate(images):
         if img.shape != (h, w):
             raise ShapeError("all images must have the same size")
-        norm = normalise_for_tracking(img)
-        if prev_norm is not None and pts.shape[0]:
-            p1, st, _err = cv2.calcOpticalFlowPyrLK(
-                prev_norm, norm, pts.reshape(-1, 1, 2), None, winSize=(win, win), maxLevel=3
-            )
-            p1 = p1.reshape(-1, 2)
-            ok = (st.ravel() == 1) & (p1[:, 0] >= 2) & (p1[:, 0] < w - 3) & (p1[:, 1] >= 2) & (
-                p1[:, 1] < h - 3
-            )
-            pts, ids = p1[ok], ids[ok]
+        cur = tracker.prepare(img)
+        if prev is not None and pts.shape[0]:
+            res = tracker.track(prev, cur, pts)
+            pts, ids = res.pts[res.ok].astype(np.float32), ids[res.ok]
         if pts.shape[0] < max_points // 2:
-            mask = np.full((h, w), 255, np.uint8)
-            for x, yy in pts:
-                cv2.circle(mask, (int(x), int(yy)), min_distance, 0, -1)
-            new = cv2.goodFeaturesToTrack(
-                norm, max_points - pts.shape[0], 0.005, min_distance, mask=mask, blockSize=7
-            )
-            if new is not None:
-                new = new.reshape(-1, 2).astype(np.float32)
+            new = detect_corners(cur.lk, detector, n_wanted=max_points - pts.shape[0],
+                                 existing_px=pts.astype(np.float64)).astype(np.float32)
+            if new.shape[0]:
                 pts = np.concatenate([pts, new])
                 ids = np.concatenate([ids, np.arange(next_id, next_id + new.shape[0])])
                 next_id += new.shape[0]
@@ -234,7 +228,7 @@ def track_observations(
             points.append(ids.copy())
             uvs.append(pts.astype(np.float64))
             vals.append(v.astype(np.float64))
-        prev_norm = norm
+        prev = cur
     return PhotometricObservations(
         np.concatenate(frames).astype(np.int64),
         np.concatenate(points).astype(np.int64),

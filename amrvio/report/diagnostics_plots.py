@@ -4,18 +4,21 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 if TYPE_CHECKING:
-    from amrvio.diagnostics.frame import FrameHealth
+    from amrvio.diagnostics.health import FrameHealth
 
 
-def _col(records: Sequence[FrameHealth], name: str) -> np.ndarray:
+def _col(records: Sequence[FrameHealth], path: str) -> np.ndarray:
+    """The values of a dotted field path (e.g. ``"blur.ratio"``) over the records (None: NaN)."""
     out = []
     for r in records:
-        v = getattr(r, name)
+        v: Any = r
+        for name in path.split("."):
+            v = getattr(v, name)
         out.append(float("nan") if v is None else float(v))
     return np.asarray(out, dtype=np.float64)
 
@@ -32,11 +35,11 @@ def plot_health(records: Sequence[FrameHealth], out_png: str | Path, title: str 
     FigureCanvasAgg(fig)
     axes = fig.subplots(5, 1, sharex=True)
     panels = [
-        ("blur_ratio", "blur ratio", "blur_flag"),
-        ("smear_px_pred", "pred. smear [px]", "blur_flag"),
-        ("exposure_ev", "exposure change [EV]", "exposure_flag"),
-        ("saturated_frac", "saturated fraction", None),
-        ("parallax_px", "parallax [px]", "low_parallax_flag"),
+        ("blur.ratio", "blur ratio", "blur.flag"),
+        ("blur.smear_px_pred", "pred. smear [px]", "blur.flag"),
+        ("exposure.ev", "exposure change [EV]", "exposure.flag"),
+        ("exposure.saturated_frac", "saturated fraction", None),
+        ("parallax.px", "parallax [px]", "parallax.low_flag"),
     ]
     for ax, (name, label, flag) in zip(axes, panels, strict=True):
         y = _col(recs, name)
@@ -44,14 +47,14 @@ def plot_health(records: Sequence[FrameHealth], out_png: str | Path, title: str 
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
         if flag is not None:
-            f = np.array([bool(getattr(r, flag)) for r in recs])
+            f = _col(recs, flag) > 0.5
             finite = y[np.isfinite(y)]
             if f.any() and finite.size:
                 lo, hi = float(finite.min()), float(finite.max())
                 ax.fill_between(t, lo, hi, where=f, color="tab:red", alpha=0.2, step="mid")
         if not np.isfinite(y).any():
             ax.text(0.5, 0.5, "not available", transform=ax.transAxes, ha="center")
-        elif name == "parallax_px":
+        elif name == "parallax.px":
             top = float(np.nanpercentile(y, 98))
             if top > 0 and float(np.nanmax(y)) > 2.0 * top:  # keep rare outliers from hiding the rest
                 ax.set_ylim(0.0, 1.2 * top)

@@ -1,20 +1,38 @@
-"""Affine brightness compensation between two frames (seed §4: I_c ~ a I_r + b).
+"""Brightness invariance for tracking (seed section 4: ``I_cur ~ a I_ref + b``).
 
-Used before KLT so that exposure jumps do not break tracks. The fit is robust and cheap: it
-matches robust quantiles of the two images (the same scene under a gain/offset change maps
-quantiles affinely). With known correspondences, use amrvio.photometric.affine.fit_affine_robust.
+Three modes, :class:`Invariance`:
+
+- ``affine``: fit (a, b) between the two images from their intensity quantiles (the same scene
+  under a gain/offset change maps quantiles affinely) and map the reference image into the
+  brightness of the current one before tracking. Cheap, and it reports the change;
+- ``normalise``: track on images normalised to a fixed mean and standard deviation (an affine
+  change of intensity leaves them unchanged, apart from clipping). Per image, so it can be cached;
+- ``none``: raw intensities.
+
+With known correspondences, fit the change with :func:`amrvio.photometric.affine.fit_affine_robust`.
 """
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
 
 QUANTILES = np.arange(5.0, 96.0, 5.0)
+U8 = NDArray[np.uint8]
+
+
+class Invariance(enum.Enum):
+    """How the tracker copes with a brightness change between two images."""
+
+    AFFINE = "affine"
+    NORMALISE = "normalise"
+    NONE = "none"
 
 
 @dataclass(frozen=True, slots=True)
@@ -28,7 +46,7 @@ class AffineBrightness:
         """True when the change is too small to matter (KLT absorbs it)."""
         return abs(self.a - 1.0) < tol_a and abs(self.b) < tol_b
 
-    def apply(self, img: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    def apply(self, img: U8) -> U8:
         """Map a reference image into the brightness of the current one (uint8, clipped)."""
         if self.is_identity(1e-3, 0.5):
             return img
@@ -38,16 +56,14 @@ class AffineBrightness:
         return np.asarray(table[img], dtype=np.uint8)
 
 
-def image_quantiles(img: NDArray[np.uint8], stride: int = 4) -> NDArray[np.float64]:
+def image_quantiles(img: U8, stride: int = 4) -> NDArray[np.float64]:
     """The 5, 10, ..., 95 % intensity quantiles (19,) of a subsampled grey image."""
     if img.ndim != 2:
         raise ShapeError(f"expected an (H, W) grey image, got shape {img.shape}")
     return np.asarray(np.percentile(img[::stride, ::stride], QUANTILES), dtype=np.float64)
 
 
-def fit_affine_quantiles(
-    img_ref: NDArray[np.uint8], img_cur: NDArray[np.uint8], *, stride: int = 4
-) -> AffineBrightness:
+def fit_affine_quantiles(img_ref: U8, img_cur: U8, *, stride: int = 4) -> AffineBrightness:
     """Affine (a, b) from the intensity quantiles of subsampled pixels."""
     return affine_from_quantiles(image_quantiles(img_ref, stride), image_quantiles(img_cur, stride))
 
@@ -65,4 +81,25 @@ def affine_from_quantiles(qr: NDArray[np.float64], qc: NDArray[np.float64]) -> A
     return AffineBrightness(float(a), float(b))
 
 
-__all__ = ["AffineBrightness", "affine_from_quantiles", "fit_affine_quantiles", "image_quantiles"]
+def normalise_for_tracking(image: U8) -> U8:
+    """(H, W) uint8 -> uint8 ``128 + 40 (I - mean) / std``: invariant to affine brightness."""
+    img = np.asarray(image)
+    if img.ndim != 2 or img.shape[0] < 8 or img.shape[1] < 8:
+        raise ShapeError(f"image must be a (H,W) grey image of at least 8x8, got {img.shape}")
+    mean, std = cv2.meanStdDev(img)
+    s = max(float(std[0, 0]), 1e-3)
+    alpha = 40.0 / s
+    beta = 128.0 - alpha * float(mean[0, 0])
+    # addWeighted saturates to 0..255 (no abs, unlike convertScaleAbs).
+    out: U8 = cv2.addWeighted(img, alpha, img, 0.0, beta, dtype=cv2.CV_8U)
+    return out
+
+
+__all__ = [
+    "AffineBrightness",
+    "Invariance",
+    "affine_from_quantiles",
+    "fit_affine_quantiles",
+    "image_quantiles",
+    "normalise_for_tracking",
+]
