@@ -128,10 +128,14 @@ def _kitti_sensitivity(quick: bool) -> list[Row]:
         "default": base,
         "features -20 %": dataclasses.replace(
             base, tracking=dataclasses.replace(base.tracking, klt=dataclasses.replace(
-                base.tracking.klt, max_features=int(0.8 * base.tracking.klt.max_features)))),
+                base.tracking.klt, detector=dataclasses.replace(
+                    base.tracking.klt.detector,
+                    max_corners=int(0.8 * base.tracking.klt.max_features))))),
         "features +20 %": dataclasses.replace(
             base, tracking=dataclasses.replace(base.tracking, klt=dataclasses.replace(
-                base.tracking.klt, max_features=int(1.2 * base.tracking.klt.max_features)))),
+                base.tracking.klt, detector=dataclasses.replace(
+                    base.tracking.klt.detector,
+                    max_corners=int(1.2 * base.tracking.klt.max_features))))),
         "BA window -2": _ba_window(base, -2),
         "BA window +2": _ba_window(base, +2),
     }

@@ -54,8 +54,8 @@ def test_a_changed_tree_round_trips(tmp_path: Path) -> None:
 
 
 def test_nested_override_keeps_the_other_defaults() -> None:
-    cfg = config_from_dict({"tracking": {"klt": {"max_features": 800}}, "seed": 3})
-    assert cfg.tracking.klt.max_features == 800
+    cfg = config_from_dict({"tracking": {"klt": {"detector": {"max_corners": 800}}}, "seed": 3})
+    assert cfg.tracking.klt.max_features == 800 == cfg.tracking.klt.detector.max_corners
     assert cfg.seed == 3
     d = PipelineConfig()
     assert cfg.tracking.klt.win_size == d.tracking.klt.win_size
@@ -67,7 +67,7 @@ def test_nested_override_keeps_the_other_defaults() -> None:
 @pytest.mark.parametrize(("data", "message"), [
     ({"sed": 1}, "unknown key 'sed'"),
     ({"tracking": {"klt": {"max_featurs": 1}}}, "unknown key 'tracking.klt.max_featurs'"),
-    ({"tracking": {"klt": {"seed": 1}}}, "unknown key 'tracking.klt.seed' (there is one seed"),
+    ({"init": {"two_view": {"seed": 1}}}, "unknown key 'init.two_view.seed' (there is one seed"),
     ({"mapping": {"mapper": {"ba_window": "eight"}}}, "'mapping.mapper.ba_window' must be an integer"),
     ({"mapping": {"mapper": {"ba_window": 8.5}}}, "'mapping.mapper.ba_window' must be an integer"),
     ({"blur_gating": "yes"}, "'blur_gating' must be true or false"),
@@ -97,7 +97,7 @@ def test_bad_yaml_names_the_file_and_line(tmp_path: Path) -> None:
 def test_one_seed_reaches_every_random_stage() -> None:
     cfg = dataclasses.replace(PipelineConfig(), seed=11)
     p = Pipeline(np.eye(3), cfg)
-    assert p.tracker.klt.config.seed == 11
+    assert p.tracker.klt.seed == 11
     assert p.tracker.seed == 11
     assert p.initializer.cfg.two_view.seed == 11
     assert p.scale.seed == 11
@@ -111,7 +111,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
 def test_cli_config_dump_and_check(tmp_path: Path) -> None:
     r = _cli("config", "--dump")
     assert r.returncode == 0
-    assert yaml.safe_load(r.stdout)["tracking"]["klt"]["max_features"] == \
+    assert yaml.safe_load(r.stdout)["tracking"]["klt"]["detector"]["max_corners"] == \
         PipelineConfig().tracking.klt.max_features
     bad = tmp_path / "bad.yaml"
     bad.write_text("init:\n  max_frame: 3\n", encoding="utf-8")

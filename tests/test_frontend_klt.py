@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -13,6 +15,7 @@ from amrvio.tracking.brightness import (
     AffineBrightness,
     fit_affine_quantiles,
 )
+from amrvio.tracking.detect import DetectorConfig
 
 
 def _img() -> np.ndarray:
@@ -30,7 +33,8 @@ def _shift(img: np.ndarray, dx: float, dy: float) -> np.ndarray:
 
 def test_detect_bucketed_spreads_corners_and_respects_existing() -> None:
     img = _img()
-    cfg = KltConfig(max_features=300, grid_rows=4, grid_cols=6, min_distance_px=8)
+    cfg = KltConfig(detector=DetectorConfig(max_corners=300, quality_level=0.001, min_distance_px=8,
+                                             border_px=8, grid_rows=4, grid_cols=6))
     pts = detect_bucketed(img, np.zeros((0, 2)), 300, cfg)
     assert 200 <= len(pts) <= 300
     h, w = img.shape
@@ -47,7 +51,7 @@ def test_klt_tracks_known_shift_through_exposure_step(gain: float, offset: float
     img0 = _img()
     dx, dy = 6.3, -4.2
     img1 = AffineBrightness(gain, offset).apply(_shift(img0, dx, dy))
-    cfg = KltConfig(max_features=400)
+    cfg = KltConfig(detector=replace(KltConfig().detector, max_corners=400))
     pts = detect_bucketed(img0, np.zeros((0, 2)), 400, cfg)
     pts = pts[(pts[:, 0] > 20) & (pts[:, 0] < 460) & (pts[:, 1] > 20) & (pts[:, 1] < 300)]
     res = KltTracker(cfg).track(img0, img1, pts)

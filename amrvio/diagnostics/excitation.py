@@ -68,15 +68,23 @@ class Excitation:
     n_samples: int
     gravity_removed: bool
     accel_var_m2_s4: float
-    accel_std_m_s2: float
     accel_dir_change_rad: float
     gyro_mean_rad_s: float
     gyro_max_rad_s: float
     gyro_axes: F64
     gyro_axis_rms_rad_s: F64
-    degenerate: bool
     status: ExcitationStatus
     condition_number: float | None = None
+
+    @property
+    def accel_std_m_s2(self) -> float:
+        return float(np.sqrt(max(self.accel_var_m2_s4, 0.0))) if np.isfinite(self.accel_var_m2_s4) \
+            else float("nan")
+
+    @property
+    def degenerate(self) -> bool:
+        """Scale is not observable in this window (too little acceleration, or too few samples)."""
+        return self.status is not ExcitationStatus.OK
 
     def with_condition_number(self, value: float) -> Excitation:
         return replace(self, condition_number=float(value))
@@ -124,8 +132,8 @@ def compute_excitation(
         acc = acc - np.asarray(accel_bias_m_s2, dtype=np.float64).reshape(1, 3)
     if n < cfg.min_samples:
         nan = float("nan")
-        return Excitation(t0, t1, n, R_world_body is not None, nan, nan, nan, nan, nan,
-                          np.eye(3), np.zeros(3), True, ExcitationStatus.TOO_FEW_SAMPLES)
+        return Excitation(t0, t1, n, R_world_body is not None, nan, nan, nan, nan,
+                          np.eye(3), np.zeros(3), ExcitationStatus.TOO_FEW_SAMPLES)
     removed = R_world_body is not None
     if R_world_body is not None:
         R = np.asarray(R_world_body, dtype=np.float64)
@@ -150,12 +158,10 @@ def compute_excitation(
         n_samples=n,
         gravity_removed=removed,
         accel_var_m2_s4=var,
-        accel_std_m_s2=std,
         accel_dir_change_rad=dir_change,
         gyro_mean_rad_s=float(norms.mean()),
         gyro_max_rad_s=float(norms.max()),
         gyro_axes=np.asarray(vt, dtype=np.float64),
         gyro_axis_rms_rad_s=np.asarray(rms_axes, dtype=np.float64),
-        degenerate=bool(degenerate),
         status=ExcitationStatus.LOW_ACCELERATION if degenerate else ExcitationStatus.OK,
     )

@@ -4,7 +4,7 @@ rejection (USAC), plus the VO's motion prior :func:`predict_tracks`."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -21,49 +21,46 @@ U8 = NDArray[np.uint8]
 KltResult = TrackResult  # the VO's name for a tracking result
 
 
+def _vo_detector() -> DetectorConfig:
+    return DetectorConfig(max_corners=1500, quality_level=0.001, min_distance_px=10, block_size=5,
+                          border_px=8, grid_rows=6, grid_cols=16)
+
+
 @dataclass(frozen=True, slots=True)
 class KltConfig:
-    """Front-end settings (pixels). ``border_px``: detection margin (tracks may come within half
-    of it). ``wide_pyr_levels``: pyramid depth after blur or a gap. ``photometric``: affine
-    brightness compensation (else none)."""
+    """Front-end settings (pixels). ``detector``: bucketed corners; its ``max_corners`` is the
+    number of tracks kept alive and its ``border_px`` the detection margin (tracks may come within
+    half of it). ``wide_pyr_levels``: pyramid depth after blur or a gap. ``photometric``: affine
+    brightness compensation (else none). ``ransac_thresh_px``: essential-matrix outlier gate."""
 
-    max_features: int = 1500
-    grid_rows: int = 6
-    grid_cols: int = 16
-    min_distance_px: int = 10
-    quality_level: float = 0.001
+    detector: DetectorConfig = field(default_factory=_vo_detector)
     win_size: int = 21
     pyr_levels: int = 3
     wide_pyr_levels: int = 5
     fb_thresh_px: float = 1.0
-    border_px: int = 8
     photometric: bool = True
     ransac_thresh_px: float = 1.0
     max_iterations: int = 30  # 15 measured: KITTI alike, sim corridor 0.13 -> 0.75 % ATE
-    seed: int = 0
 
-    def detector(self) -> DetectorConfig:
-        return DetectorConfig(
-            max_corners=self.max_features, quality_level=self.quality_level,
-            min_distance_px=self.min_distance_px, block_size=5, border_px=self.border_px,
-            grid_rows=self.grid_rows, grid_cols=self.grid_cols,
-        )
+    @property
+    def max_features(self) -> int:
+        return self.detector.max_corners
 
-    def lk(self, wide: bool = False) -> LkConfig:
+    def lk(self, wide: bool = False, seed: int = 0) -> LkConfig:
         return LkConfig(
             invariance=Invariance.AFFINE if self.photometric else Invariance.NONE,
             win_size=self.win_size,
             pyr_levels=self.wide_pyr_levels if wide else self.pyr_levels,
             max_iterations=self.max_iterations, epsilon=0.01, fb_thresh_px=self.fb_thresh_px,
-            max_error=None, border_px=self.border_px * 0.5,
-            epipolar=EpipolarConfig(thresh_px=self.ransac_thresh_px, seed=self.seed),
+            max_error=None, border_px=self.detector.border_px * 0.5,
+            epipolar=EpipolarConfig(thresh_px=self.ransac_thresh_px, seed=seed),
         )
 
 
 def detect_bucketed(img: U8, existing_px: F64, n_wanted: int, config: KltConfig) -> F64:
     """Shi-Tomasi corners spread over a grid: at most ``n_wanted`` new (M, 2) pixel corners,
     kept away from ``existing_px`` (N, 2) and balanced per cell (strongest first)."""
-    return detect_corners(img, config.detector(), n_wanted=n_wanted, existing_px=existing_px)
+    return detect_corners(img, config.detector, n_wanted=n_wanted, existing_px=existing_px)
 
 
 def predict_tracks(K: F64, T_cam_world_pred: F64, R_cur_prev: F64, pts: F64,
@@ -94,12 +91,14 @@ def predict_tracks(K: F64, T_cam_world_pred: F64, R_cur_prev: F64, pts: F64,
 
 
 class KltTracker:
-    """Tracks points from one image to the next. Stateless between calls apart from config."""
+    """Tracks points from one image to the next. Stateless between calls apart from config;
+    ``seed`` seeds the essential-matrix RANSAC."""
 
-    def __init__(self, config: KltConfig | None = None) -> None:
+    def __init__(self, config: KltConfig | None = None, seed: int = 0) -> None:
         self.config = config or KltConfig()
-        self._narrow = LkTracker(self.config.lk(wide=False))
-        self._wide = LkTracker(self.config.lk(wide=True))
+        self.seed = seed
+        self._narrow = LkTracker(self.config.lk(wide=False, seed=seed))
+        self._wide = LkTracker(self.config.lk(wide=True, seed=seed))
 
     def track(
         self,

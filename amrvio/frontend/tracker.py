@@ -126,7 +126,7 @@ class Tracker:
         self.cfg = config
         self.K = K
         self.seed = seed
-        self.klt = KltTracker(config.klt)
+        self.klt = KltTracker(config.klt, seed)
         self.tracks = TrackSet()
         self.motion = MotionModel()
         self.prev_img: U8 | None = None

@@ -83,8 +83,7 @@ class Pipeline:
         cfg = config or PipelineConfig()
         self.cfg = cfg
         K = np.asarray(K, dtype=np.float64)
-        tracking = dataclasses.replace(cfg.tracking,
-                                       klt=dataclasses.replace(cfg.tracking.klt, seed=cfg.seed))
+        tracking = cfg.tracking
         self.tracker = Tracker(K, tracking, cfg.seed)
         self.initializer = Initializer(K, cfg.init, cfg.seed)
         self.mapping = LocalMapping(K, cfg.mapping)
