@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from amrvio.diagnostics.blur import BlurScorerConfig
+from amrvio.diagnostics.frame import DiagnosticsConfig
 from amrvio.errors import ConfigError
 from amrvio.estimator.initializer import InitConfig
 from amrvio.estimator.local_mapping import MappingConfig
@@ -40,8 +40,9 @@ class PipelineConfig:
 
     seed: int = 0
     track: bool = True
+    diagnose: bool = True
     blur_gating: bool = True
-    blur: BlurScorerConfig = field(default_factory=lambda: BlurScorerConfig(window=10, reset_after=10))
+    diagnostics: DiagnosticsConfig = field(default_factory=DiagnosticsConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     init: InitConfig = field(default_factory=InitConfig)
     mapping: MappingConfig = field(default_factory=MappingConfig)
@@ -54,11 +55,57 @@ HELP: dict[str, str] = {
     "seed": "seed of every random choice (RANSAC, sampling): same input and seed, same output",
     "track": "run tracking (false: diagnostics only, as `amrvio diagnose`)",
     "blur_gating": "blurred frames give a pose but make no keyframe and no track update",
-    "blur": "blur score normalised by recent sharp frames",
-    "blur.window": "recent sharp scores in the running median",
-    "blur.blur_ratio": "a frame whose score / median is below this is blurred",
-    "blur.sharp_ratio": "frames at or above this ratio join the sharp reference",
-    "blur.reset_after": "consecutive non-sharp frames after which the reference restarts",
+    "diagnose": "compute the per-frame health record (blur, smear, exposure, parallax, excitation)",
+    "diagnostics": "the health record; its blur scorer also gates blurred frames for tracking",
+    "diagnostics.blur": "blur score normalised by recent sharp frames",
+    "diagnostics.blur.window": "recent sharp scores in the running median",
+    "diagnostics.blur.blur_ratio": "a frame whose score / median is below this is blurred",
+    "diagnostics.blur.sharp_ratio": "frames at or above this ratio join the sharp reference",
+    "diagnostics.blur.reset_after": "consecutive non-sharp frames after which the reference restarts",
+    "diagnostics.exposure": "gain/offset and EV between frames",
+    "diagnostics.exposure.ev_step": "|EV| that flags an exposure step",
+    "diagnostics.exposure.patch_radius": "radius of the patches sampled around tracks (px)",
+    "diagnostics.exposure.curvature_dn": "intensity curvature scale of the patch weights (grey levels)",
+    "diagnostics.exposure.smooth_px": "smoothing of the same-pixel fallback (px)",
+    "diagnostics.exposure.max_abs_ev": "largest |EV| accepted as a measurement",
+    "diagnostics.exposure.grid_step": "pixel step of the same-pixel fallback",
+    "diagnostics.exposure.min_tracks": "tracks needed for the tracked-patch fit",
+    "diagnostics.exposure.huber_k": "Huber constant of the robust fit (in robust sigmas)",
+    "diagnostics.tracking": "the diagnostics' own sparse tracks",
+    "diagnostics.tracking.detector": "corner detection",
+    "diagnostics.tracking.detector.max_corners": "corners tracked",
+    "diagnostics.tracking.detector.quality_level": "Shi-Tomasi quality level relative to the best corner",
+    "diagnostics.tracking.detector.min_distance_px": "minimum distance between corners (px)",
+    "diagnostics.tracking.detector.block_size": "corner measure window (px)",
+    "diagnostics.tracking.detector.border_px": "image border without corners (px)",
+    "diagnostics.tracking.detector.grid_rows": "detection buckets, rows (0: no bucketing)",
+    "diagnostics.tracking.detector.grid_cols": "detection buckets, columns (0: no bucketing)",
+    "diagnostics.tracking.lk": "pyramidal LK",
+    "diagnostics.tracking.lk.invariance": "brightness invariance: affine, normalise or none",
+    "diagnostics.tracking.lk.win_size": "LK window (px)",
+    "diagnostics.tracking.lk.pyr_levels": "pyramid levels",
+    "diagnostics.tracking.lk.max_iterations": "LK iterations per level",
+    "diagnostics.tracking.lk.epsilon": "LK convergence threshold (px)",
+    "diagnostics.tracking.lk.fb_thresh_px": "forward-backward check threshold (px); null: off",
+    "diagnostics.tracking.lk.max_error": "largest LK residual accepted; null: no bound",
+    "diagnostics.tracking.lk.border_px": "tracks closer to the border are dropped (px)",
+    "diagnostics.tracking.lk.epipolar": "epipolar outlier check; null: off",
+    "diagnostics.tracking.lk.max_width_px": "wider images are tracked on a coarser pyramid level (px)",
+    "diagnostics.reference": "parallax reference frame",
+    "diagnostics.reference.min_tracks": "tracks below which the reference is renewed",
+    "diagnostics.reference.min_track_frac": "share of the reference's tracks below which it is renewed",
+    "diagnostics.reference.max_parallax_px": "parallax above which the reference is renewed (px)",
+    "diagnostics.reference.low_parallax_px": "parallax below which frames count as low parallax (px)",
+    "diagnostics.reference.min_frames_low_parallax": "frames of low parallax before the flag is raised",
+    "diagnostics.excitation": "IMU excitation (scale observability)",
+    "diagnostics.excitation.min_accel_std_m_s2": "acceleration spread below which a window is degenerate (m/s^2)",
+    "diagnostics.excitation.min_accel_m_s2": "mean acceleration that counts in the direction change (m/s^2)",
+    "diagnostics.excitation.min_samples": "IMU samples needed",
+    "diagnostics.excitation.lowpass_s": "averaging bin that removes vibration (s); 0: off",
+    "diagnostics.smear_bound_px": "the exposure advice keeps the predicted smear under this (px)",
+    "diagnostics.smear_flag_px": "predicted smear above this sets the blur flag (px)",
+    "diagnostics.assumed_exposure_s": "exposure for the smear prediction when frames carry none (s); null: derived",
+    "diagnostics.excitation_window_s": "IMU window of the excitation record (s)",
     "tracking": "KLT front-end, PnP, direct alignment",
     "tracking.klt": "corner detection and pyramidal KLT",
     "tracking.klt.detector": "bucketed Shi-Tomasi corners",

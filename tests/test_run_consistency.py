@@ -1,4 +1,4 @@
-"""`amrvio run` outputs agree with each other frame by frame: frames.csv (the records), the
+"""`amrvio run` outputs agree with each other frame by frame: health.csv (the records), the
 trajectory, the keyframes and the summary; the same input and seed give the same files."""
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def _rows(path: Path) -> list[dict[str, str]]:
 def test_records_trajectory_and_summary_agree(runs: tuple[Path, Path, Path]) -> None:
     seq, out, _ = runs
     ds = open_dataset(str(seq))
-    rows = _rows(out / "frames.csv")
+    rows = _rows(out / "health.csv")
     traj = np.loadtxt(out / "trajectory.tum", ndmin=2)
     kfs = np.loadtxt(out / "keyframes.tum", ndmin=2)
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
@@ -51,7 +51,7 @@ def test_records_trajectory_and_summary_agree(runs: tuple[Path, Path, Path]) -> 
     assert len(rows) == n == summary["n_frames"] == traj.shape[0]
     assert traj.shape[1] == 8
     # same frames, same stamps, in order
-    assert [int(r["index"]) for r in rows] == list(range(n))
+    assert [int(r["frame"]) for r in rows] == list(range(n))
     stamps = np.array([f.t_ns for f in ds.frames]) * 1e-9
     np.testing.assert_allclose(traj[:, 0], stamps, atol=1e-9)
     np.testing.assert_allclose([float(r["t_s"]) for r in rows], stamps, atol=1e-9)
@@ -60,12 +60,12 @@ def test_records_trajectory_and_summary_agree(runs: tuple[Path, Path, Path]) -> 
     for r in rows:
         counts[r["status"]] = counts.get(r["status"], 0) + 1
     assert {k: v for k, v in summary["status_counts"].items() if v} == counts
-    is_kf = [r["keyframe"] == "1" for r in rows]
+    is_kf = [r["is_keyframe"] == "1" for r in rows]
     assert sum(is_kf) == summary["n_keyframes"] == kfs.shape[0]
     np.testing.assert_allclose(kfs[:, 0], traj[np.array(is_kf), 0])
     np.testing.assert_allclose(kfs[:, 1:], traj[np.array(is_kf), 1:])
     # events of the summary are those of the rows
-    ev = [[int(r["index"]), e] for r in rows for e in r["events"].split(";") if e]
+    ev = [[int(r["frame"]), e] for r in rows for e in r["events"].split(";") if e]
     assert ev == summary["events"]
     # the blackout is visible: some frames were not tracked on their own
     assert any(r["tracking"] not in ("tracked", "init_tracked", "started") for r in rows)
@@ -77,7 +77,7 @@ def test_records_trajectory_and_summary_agree(runs: tuple[Path, Path, Path]) -> 
 
 def test_same_input_same_outputs(runs: tuple[Path, Path, Path]) -> None:
     _, a, b = runs
-    for name in ("trajectory.tum", "keyframes.tum", "frames.csv", "map.ply", "scale_drift.csv"):
+    for name in ("trajectory.tum", "keyframes.tum", "health.csv", "advice.txt", "map.ply", "scale_drift.csv"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
     sa = json.loads((a / "summary.json").read_text(encoding="utf-8"))
     sb = json.loads((b / "summary.json").read_text(encoding="utf-8"))

@@ -14,6 +14,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True, help="output folder")
     parser.add_argument("--calib", type=Path, default=None, metavar="FILE",
                         help="calibration file that overrides the dataset's own")
+    parser.add_argument("--config", type=Path, default=None, metavar="FILE.yaml",
+                        help="pipeline configuration (its diagnostics section; the options below "
+                             "override it)")
     parser.add_argument("--max-frames", type=int, default=None, help="stop after N frames")
     parser.add_argument("--assumed-exposure-ms", type=float, default=None,
                         help="exposure used for the smear prediction when frames carry none "
@@ -32,20 +35,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import csv
-    import sys
-    from dataclasses import replace
+    import dataclasses
 
     import numpy as np
-    from tqdm import tqdm
 
-    from amrvio.diagnostics.advice import make_advice
-    from amrvio.diagnostics.exposure import ExposureConfig
-    from amrvio.diagnostics.frame import DiagnosticsConfig, FrameDiagnostics, health_rows
+    from amrvio.config import PipelineConfig, load_config
     from amrvio.errors import ConfigError
-    from amrvio.imu.static import initial_standstill
-    from amrvio.imu.window import frame_imu_window
     from amrvio.io.dataset import open_dataset
+    from amrvio.pipeline.run import diagnose, write_advice, write_health
 
     if not args.ev_step > 0 or not args.smear_bound_px > 0:
         raise ConfigError("--ev-step and --smear-bound-px must be > 0")
@@ -53,59 +50,30 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--max-frames must be >= 1, got {args.max_frames}")
     if args.assumed_exposure_ms is not None and not args.assumed_exposure_ms > 0:
         raise ConfigError(f"--assumed-exposure-ms must be > 0, got {args.assumed_exposure_ms}")
+    cfg = load_config(args.config) if args.config is not None else PipelineConfig()
+    dc = cfg.diagnostics
+    cfg = dataclasses.replace(cfg, diagnostics=dataclasses.replace(
+        dc, smear_bound_px=args.smear_bound_px,
+        exposure=dataclasses.replace(dc.exposure, ev_step=args.ev_step)))
     ds = open_dataset(args.dataset, calib=args.calib)
     if not ds.frames:
         raise ConfigError(f"{args.dataset}: the dataset has no frames")
-    bias = None
+    bias: str | np.ndarray = args.gyro_bias
     if args.gyro_bias not in ("auto", "none"):
         try:
             bias = np.array([float(v) for v in args.gyro_bias.split(",")])
         except ValueError:
-            bias = None
-        if bias is None or bias.shape != (3,):
+            bias = np.zeros(0)
+        if bias.shape != (3,):
             raise ConfigError(f"--gyro-bias must be auto, none or x,y,z; got {args.gyro_bias!r}")
-    elif args.gyro_bias == "auto" and ds.imu is not None:
-        bias = initial_standstill(ds.imu).gyro_bias_rad_s  # None unless the first second is still
-    assumed_s: float | None = None
-    notes: list[str] = []
-    if ds.imu is not None and any(f.exposure_s is None for f in ds.frames):
-        if args.assumed_exposure_ms is not None:
-            assumed_s = args.assumed_exposure_ms * 1e-3
-        else:
-            t = np.array([f.t_ns for f in ds.frames], dtype=np.float64) * 1e-9
-            period = float(np.median(np.diff(t))) if t.size > 1 else 0.05
-            assumed_s = min(0.010, 0.5 * period)
-        notes.append(f"note: the dataset records no exposure times; the smear is predicted for an "
-                     f"assumed {assumed_s * 1e3:.1f} ms exposure (set --assumed-exposure-ms)")
-    if bias is not None:
-        notes.append("note: gyro bias " + " ".join(f"{v:.5f}" for v in bias)
-                     + " rad/s subtracted (from a still start, or --gyro-bias)")
-    cfg = DiagnosticsConfig(
-        assumed_exposure_s=assumed_s,
-        smear_bound_px=args.smear_bound_px,
-        exposure=replace(ExposureConfig(), ev_step=args.ev_step),
-    )
-    stage = FrameDiagnostics(cfg, ds.camera, ds.T_body_cam, ds.inverse_response, bias)
+    recs, setup = diagnose(ds, cfg, gyro_bias=bias, assumed_ms=args.assumed_exposure_ms,
+                           max_frames=args.max_frames, progress=True)
+    records = [r.diagnostics for r in recs if r.diagnostics is not None]
     frames = ds.frames if args.max_frames is None else ds.frames[: args.max_frames]
-    records = []
-    prev_t: int | None = None
-    for fr in tqdm(frames, desc="diagnose", unit="frame", file=sys.stderr,
-                   disable=not sys.stderr.isatty()):
-        imu_win = None
-        if ds.imu is not None:
-            T = fr.exposure_s or cfg.assumed_exposure_s or 0.0
-            imu_win = frame_imu_window(ds.imu, fr.t_ns, prev_t, T)
-        records.append(stage.process(fr.load(), fr.t_ns, imu_win, fr.exposure_s, fr.index))
-        prev_t = fr.t_ns
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
-    cols, rows = health_rows(records)
-    with open(out / "health.csv", "w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
-    advice = make_advice(records, cfg.smear_bound_px) + notes
-    (out / "advice.txt").write_text("\n".join(advice) + "\n", encoding="utf-8")
+    write_health(out / "health.csv", recs)
+    write_advice(out / "advice.txt", recs, cfg, setup.notes)
     if not args.no_plots:
         from amrvio.report.diagnostics_plots import plot_health
 

@@ -60,6 +60,7 @@ def build_config(args: argparse.Namespace) -> object:
 def run(args: argparse.Namespace) -> int:
     from amrvio.config import PipelineConfig
     from amrvio.io.dataset import open_dataset
+    from amrvio.pipeline.diagnose import setup_diagnostics
     from amrvio.pipeline.run import run_pipeline, write_outputs
     from amrvio.pipeline.threads import limit_native_threads
 
@@ -69,8 +70,9 @@ def run(args: argparse.Namespace) -> int:
     # one thread for OpenCV and OpenBLAS: measured faster for the VO's small solves
     limit_native_threads(1)
     ds = open_dataset(args.dataset, args.calib)
-    out = run_pipeline(ds, cfg, max_frames=args.max_frames, progress=True)
-    summary = write_outputs(out, args.out, cfg)
+    setup = setup_diagnostics(ds, cfg.diagnostics) if cfg.diagnose else None
+    out = run_pipeline(ds, cfg, max_frames=args.max_frames, progress=True, diagnostics=setup)
+    summary = write_outputs(out, args.out, cfg, setup.notes if setup is not None else ())
     counts = summary["status_counts"]
     print(f"{summary['n_frames']} frames {counts}, {summary['n_keyframes']} keyframes, "
           f"{summary['n_map_points']} map points -> {args.out}")

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.config import PipelineConfig
-from amrvio.diagnostics.blur import BlurResult, BlurScorer, var_laplacian
+from amrvio.diagnostics.blur import BlurResult, BlurScorer, blur_score
 from amrvio.diagnostics.frame import FrameDiagnostics, FrameHealth
 from amrvio.estimator.camera_height import HeightEstimate
 from amrvio.estimator.initializer import Initializer, InitResult
@@ -30,6 +30,7 @@ from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, Track
 from amrvio.geometry._common import invert_T
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
 from amrvio.pipeline.records import EstimatorReport, FrameRecord, PoseStatus
+from amrvio.types.camera import CameraModel
 from amrvio.types.sensors import ImuData
 
 F64 = NDArray[np.float64]
@@ -68,21 +69,23 @@ class PipelineOutput:
         return np.array([r.t_ns for r in self.records], dtype=np.int64)
 
 
-def blur_score(image: U8) -> float:
-    """var(Laplacian) / var(I) on every 2nd pixel: invariant to an affine brightness change."""
-    sub = image[::2, ::2]
-    return var_laplacian(image, step=2) / max(float(np.var(sub)), 1.0)
-
-
 class Pipeline:
-    """Monocular VO with per-frame diagnostics. Construct with the pinhole ``K`` (3x3) of
-    undistorted pixels; ``diagnostics`` is the FrameDiagnostics stage (None: off)."""
+    """Monocular VO with per-frame diagnostics.
 
-    def __init__(self, K: F64, config: PipelineConfig | None = None,
+    ``camera``: the camera model (images are undistorted to its pinhole before tracking; the
+    diagnostics see the raw image), or a pinhole ``K`` (3x3) for undistorted images.
+    ``diagnostics``: the FrameDiagnostics stage (None: off; see ``pipeline.diagnose``).
+    The blur gate scores every image with ``diagnostics.blur.blur_score`` and the diagnostics'
+    BlurScorerConfig; the health record's blur flag also counts the gyro-predicted smear.
+    """
+
+    def __init__(self, camera: CameraModel | F64, config: PipelineConfig | None = None,
                  diagnostics: FrameDiagnostics | None = None) -> None:
         cfg = config or PipelineConfig()
         self.cfg = cfg
-        K = np.asarray(K, dtype=np.float64)
+        self.camera = camera if isinstance(camera, CameraModel) else None
+        K = np.asarray(camera.pinhole().K if isinstance(camera, CameraModel) else camera,
+                       dtype=np.float64)
         tracking = cfg.tracking
         self.tracker = Tracker(K, tracking, cfg.seed)
         self.initializer = Initializer(K, cfg.init, cfg.seed)
@@ -92,7 +95,7 @@ class Pipeline:
             cfg.output.final_refine, tracking.min_pnp_inliers, tracking.huber_px,
             tracking.pnp_thresh_px))
         self.diagnostics = diagnostics
-        self.blur = BlurScorer(cfg.blur)
+        self.blur = BlurScorer(cfg.diagnostics.blur)
         self.records: list[FrameRecord] = []
         self.initialised = False
         self.timings: dict[str, float] = {}
@@ -111,6 +114,11 @@ class Pipeline:
             t0 = time.perf_counter()
             health = self.diagnostics.process(image, t_ns, imu, exposure_s, index)
             self._toc("diagnostics", t0)
+        cam = self.camera
+        if cam is not None and self.cfg.track and any(abs(c) > 0 for c in cam.distortion):
+            t0 = time.perf_counter()
+            image = np.asarray(cam.undistort_image(image), dtype=np.uint8)
+            self._toc("undistort", t0)
         t0 = time.perf_counter()
         blur = self.blur.update(blur_score(image))
         blurred = bool(blur.is_blurred) and self.cfg.blur_gating
@@ -299,4 +307,4 @@ class Pipeline:
                               tuple(self.scale.readings), fs, self.all_timings())
 
 
-__all__ = ["Pipeline", "PipelineOutput", "blur_score"]
+__all__ = ["Pipeline", "PipelineOutput"]
