@@ -6,8 +6,9 @@ import numpy as np
 
 from amrvio.estimator.camera_height import HeightEstimate, estimate_height, smooth_scales
 from amrvio.estimator.local_ba import BAProblem, solve_ba_gtsam, solve_ba_scipy
-from amrvio.geometry._common import project, se3_exp
 from amrvio.geometry.ground_plane import PlaneStatus
+from amrvio.geometry.projection import project
+from amrvio.types.lie import SE3
 
 K = np.array([[500.0, 0, 320.0], [0, 500.0, 240.0], [0, 0, 1]])
 
@@ -15,7 +16,7 @@ K = np.array([[500.0, 0, 320.0], [0, 500.0, 240.0], [0, 0, 1]])
 def _problem(noise_px: float, seed: int = 0) -> tuple[BAProblem, np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     nk = 5
-    T = np.stack([np.linalg.inv(se3_exp(np.r_[0.1 * i, 0, 0.5 * i, 0, 0.02 * i, 0]))
+    T = np.stack([np.linalg.inv(SE3.exp(np.r_[0.1 * i, 0, 0.5 * i, 0, 0.02 * i, 0]).matrix())
                   for i in range(nk)])
     X = rng.uniform([-4, -3, 6], [4, 3, 15], (150, 3))
     oc, op, ou = [], [], []
@@ -26,7 +27,7 @@ def _problem(noise_px: float, seed: int = 0) -> tuple[BAProblem, np.ndarray, np.
         ou.append(uv + rng.normal(0, noise_px, uv.shape) if noise_px else uv)
     Tn = T.copy()
     for i in range(2, nk):
-        Tn[i] = se3_exp(rng.normal(0, 0.01, 6)) @ T[i]
+        Tn[i] = SE3.exp(rng.normal(0, 0.01, 6)).matrix() @ T[i]
     fixed = np.zeros(nk, dtype=bool)
     fixed[:2] = True
     prob = BAProblem(Tn, fixed, X + rng.normal(0, 0.05, X.shape), np.array(oc), np.array(op),

@@ -3,7 +3,7 @@
 Residual r(u) = I_c(w(u; xi)) - (a I_r(u) + b) with the warp w(u) = pi(K T_c_r d(u) K^-1 u);
 Gauss-Newton (J^T W J) dtheta = -J^T W r with Huber weights, coarse-to-fine over an image
 pyramid. Jacobians (seed §4): dr/da = -I_r(u), dr/db = -1,
-dr/dxi = grad I_c(u') d(pi)/dP dP/dxi with dP/dxi = [I, -[P]x] (left perturbation).
+dr/dxi = grad I_c(u') d(uv)/d(xi) (geometry.projection.project_jacobian, left perturbation).
 """
 
 from __future__ import annotations
@@ -16,7 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
-from amrvio.geometry._common import check_matrix, check_points, se3_exp
+from amrvio.geometry.checks import check_matrix, check_points
+from amrvio.geometry.projection import MIN_DEPTH, project, project_jacobian
+from amrvio.types.lie import SE3
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
@@ -111,6 +113,7 @@ def align_direct(
         s = 0.5**lvl
         fx, fy = Km[0, 0] * s, Km[1, 1] * s
         cx, cy = (Km[0, 2] + 0.5) * s - 0.5, (Km[1, 2] + 0.5) * s - 0.5
+        K_lvl = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
         ul = (u + 0.5) * s - 0.5
         Ir = _sample(pr[lvl], ul)
         # 3D points in the reference camera
@@ -120,28 +123,19 @@ def align_direct(
         gy = cv2.Sobel(Ic, cv2.CV_32F, 0, 1, ksize=3, scale=1.0 / 8)
         h, w = Ic.shape
         for _ in range(cfg.iterations):
-            P = P_ref @ T[:3, :3].T + T[:3, 3]
-            z = P[:, 2]
-            ok = z > 1e-6
-            zs = np.where(ok, z, 1.0)
-            uc = np.column_stack([fx * P[:, 0] / zs + cx, fy * P[:, 1] / zs + cy])
+            uc, z = project(K_lvl, T, P_ref)
+            ok = z > MIN_DEPTH
             ok &= (uc[:, 0] >= 1) & (uc[:, 0] < w - 2) & (uc[:, 1] >= 1) & (uc[:, 1] < h - 2)
             n_used = int(ok.sum())
             if n_used < cfg.min_pixels:
                 return DirectResult(DirectStatus.TOO_FEW_PIXELS, T, a, b, n_used, rms)
-            Pk, zk, uk = P[ok], zs[ok], uc[ok]
+            uk = uc[ok]
             r = _sample(Ic, uk) - (a * Ir[ok] + b)  # seed §4 residual
             gxs, gys = _sample(gx, uk), _sample(gy, uk)
-            iz = 1.0 / zk
-            # d(pi)/dP rows, combined with the image gradient: (N, 3)
-            gP = np.column_stack([gxs * fx * iz, gys * fy * iz,
-                                  -(gxs * fx * Pk[:, 0] + gys * fy * Pk[:, 1]) * iz * iz])
-            X, Y, Z = Pk[:, 0], Pk[:, 1], Pk[:, 2]
-            # gP @ (-[P]x) for the rotation part
-            Jrot = np.column_stack([gP[:, 2] * Y - gP[:, 1] * Z,
-                                    gP[:, 0] * Z - gP[:, 2] * X,
-                                    gP[:, 1] * X - gP[:, 0] * Y])
-            J = np.column_stack([gP, Jrot, -Ir[ok], -np.ones(n_used)])  # dr/da=-I_r, dr/db=-1
+            # image gradient times d(uv)/d(xi): (N, 6)
+            J_uv = project_jacobian(K_lvl, T, P_ref[ok])[0]
+            J_xi = gxs[:, None] * J_uv[:, 0, :] + gys[:, None] * J_uv[:, 1, :]
+            J = np.column_stack([J_xi, -Ir[ok], -np.ones(n_used)])  # dr/da=-I_r, dr/db=-1
             ar = np.abs(r)
             wgt = np.where(ar <= cfg.huber, 1.0, cfg.huber / np.maximum(ar, 1e-12))
             H = J.T @ (J * wgt[:, None])
@@ -154,7 +148,7 @@ def align_direct(
                 dx[:npar] = -np.linalg.solve(H[:npar, :npar] + 1e-9 * np.eye(npar), g[:npar])
             except np.linalg.LinAlgError:
                 return DirectResult(DirectStatus.DIVERGED, T, a, b, n_used, rms)
-            T = se3_exp(dx[:6]) @ T
+            T = SE3.exp(dx[:6]).matrix() @ T
             a += float(dx[6])
             b += float(dx[7])
             rms = float(np.sqrt(np.mean(r * r)))

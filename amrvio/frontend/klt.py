@@ -15,7 +15,7 @@ from amrvio.frontend.photometric_comp import (
     AffineBrightness,
     fit_affine_quantiles,
 )
-from amrvio.geometry._common import project
+from amrvio.geometry.projection import project
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
