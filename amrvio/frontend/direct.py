@@ -3,7 +3,9 @@
 Residual r(u) = I_c(w(u; xi)) - (a I_r(u) + b) with the warp w(u) = pi(K T_c_r d(u) K^-1 u);
 Gauss-Newton (J^T W J) dtheta = -J^T W r with Huber weights, coarse-to-fine over an image
 pyramid. Jacobians (seed §4): dr/da = -I_r(u), dr/db = -1,
-dr/dxi = grad I_c(u') d(uv)/d(xi) (geometry.projection.project_jacobian, left perturbation).
+dr/dxi = grad I_c(u') d(uv)/d(xi) (geometry.projection.project_jacobian, left perturbation,
+fused with the gradient in ``_gradient_pose_jacobian``). Near-zero depth: pixels whose warped
+point has Z <= geometry.projection.MIN_DEPTH are dropped.
 """
 
 from __future__ import annotations
@@ -17,8 +19,8 @@ from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
 from amrvio.geometry.checks import check_matrix, check_points
-from amrvio.geometry.projection import MIN_DEPTH, project, project_jacobian
-from amrvio.types.lie import SE3
+from amrvio.geometry.projection import MIN_DEPTH
+from amrvio.types.lie import SE3, transform_points
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
@@ -75,6 +77,23 @@ def _pyramid(img: U8, levels: int) -> list[NDArray[np.float32]]:
     return pyr
 
 
+def _gradient_pose_jacobian(gx: F64, gy: F64, P_cam: F64, iz: F64, fx: float, fy: float) -> F64:
+    """(N, 6) d(I_c(uv))/d(xi) = [gx, gy] . d(uv)/d(xi) for camera points (N, 3), 1/Z ``iz``.
+
+    The chain rule of ``geometry.projection.project_jacobian`` (left perturbation, [rho, phi])
+    fused with the image gradient: 6 columns instead of a (N, 2, 6) block, in the operation
+    order the VO's figures were made with (tests check it against project_jacobian).
+    """
+    gP = np.column_stack([gx * fx * iz, gy * fy * iz,
+                          -(gx * fx * P_cam[:, 0] + gy * fy * P_cam[:, 1]) * iz * iz])
+    X, Y, Z = P_cam[:, 0], P_cam[:, 1], P_cam[:, 2]
+    # gP @ (-[P]x) for the rotation part
+    Jrot = np.column_stack([gP[:, 2] * Y - gP[:, 1] * Z,
+                            gP[:, 0] * Z - gP[:, 2] * X,
+                            gP[:, 1] * X - gP[:, 0] * Y])
+    return np.column_stack([gP, Jrot])
+
+
 def align_direct(
     img_ref: U8,
     img_cur: U8,
@@ -113,7 +132,6 @@ def align_direct(
         s = 0.5**lvl
         fx, fy = Km[0, 0] * s, Km[1, 1] * s
         cx, cy = (Km[0, 2] + 0.5) * s - 0.5, (Km[1, 2] + 0.5) * s - 0.5
-        K_lvl = np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
         ul = (u + 0.5) * s - 0.5
         Ir = _sample(pr[lvl], ul)
         # 3D points in the reference camera
@@ -123,18 +141,20 @@ def align_direct(
         gy = cv2.Sobel(Ic, cv2.CV_32F, 0, 1, ksize=3, scale=1.0 / 8)
         h, w = Ic.shape
         for _ in range(cfg.iterations):
-            uc, z = project(K_lvl, T, P_ref)
+            P = transform_points(T, P_ref)
+            z = P[:, 2]
             ok = z > MIN_DEPTH
+            zs = np.where(ok, z, 1.0)
+            # the pinhole of geometry.projection.project, written as x / z (figures unchanged)
+            uc = np.column_stack([fx * P[:, 0] / zs + cx, fy * P[:, 1] / zs + cy])
             ok &= (uc[:, 0] >= 1) & (uc[:, 0] < w - 2) & (uc[:, 1] >= 1) & (uc[:, 1] < h - 2)
             n_used = int(ok.sum())
             if n_used < cfg.min_pixels:
                 return DirectResult(DirectStatus.TOO_FEW_PIXELS, T, a, b, n_used, rms)
-            uk = uc[ok]
+            Pk, zk, uk = P[ok], zs[ok], uc[ok]
             r = _sample(Ic, uk) - (a * Ir[ok] + b)  # seed §4 residual
             gxs, gys = _sample(gx, uk), _sample(gy, uk)
-            # image gradient times d(uv)/d(xi): (N, 6)
-            J_uv = project_jacobian(K_lvl, T, P_ref[ok])[0]
-            J_xi = gxs[:, None] * J_uv[:, 0, :] + gys[:, None] * J_uv[:, 1, :]
+            J_xi = _gradient_pose_jacobian(gxs, gys, Pk, 1.0 / zk, fx, fy)
             J = np.column_stack([J_xi, -Ir[ok], -np.ones(n_used)])  # dr/da=-I_r, dr/db=-1
             ar = np.abs(r)
             wgt = np.where(ar <= cfg.huber, 1.0, cfg.huber / np.maximum(ar, 1e-12))
