@@ -213,7 +213,11 @@ def _sim(repeats: int, seconds: float) -> list[Row]:
 
 def _ba_backends(repeats: int) -> list[Row]:
     from amrvio.estimator.local_ba import BAProblem, solve_ba_gtsam, solve_ba_scipy
-    from amrvio.geometry._common import project, se3_exp
+    from amrvio.geometry.projection import project
+    from amrvio.types.lie import SE3
+
+    def se3_exp(xi: NDArray[np.float64]) -> NDArray[np.float64]:
+        return SE3.exp(xi).matrix()
 
     rng = np.random.default_rng(0)
     K = np.array([[718.856, 0, 607.19], [0, 718.856, 185.2], [0, 0, 1]])

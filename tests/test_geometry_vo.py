@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from amrvio.errors import ShapeError
-from amrvio.geometry._common import invert_T, pixels_to_normalized, project, rt_to_T, so3_exp_small
 from amrvio.geometry.ground_plane import PlaneStatus, fit_ground_plane
 from amrvio.geometry.pnp import PnPStatus, refine_pose_huber, solve_pnp
+from amrvio.geometry.projection import pixels_to_normalized, project
 from amrvio.geometry.triangulation import triangulate
 from amrvio.geometry.two_view import TwoViewStatus, two_view_init
+from amrvio.types.lie import se3_matrix, se3_matrix_inverse, so3_exp
 
 K = np.array([[500.0, 0, 320.0], [0, 500.0, 240.0], [0, 0, 1]])
 
@@ -28,9 +29,9 @@ def _views(T21: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def test_two_view_recovers_rotation_and_translation_direction() -> None:
     X = _scene()
-    R = so3_exp_small(np.array([0.02, -0.05, 0.01]))
+    R = so3_exp(np.array([0.02, -0.05, 0.01]))
     t = np.array([0.3, -0.05, -1.0])
-    T21 = rt_to_T(R, t)
+    T21 = se3_matrix(R, t)
     u1, u2 = _views(T21, X)
     res = two_view_init(u1, u2, K)
     assert res.status is TwoViewStatus.OK
@@ -53,7 +54,7 @@ def test_two_view_zero_parallax_is_typed_failure() -> None:
 
 def test_two_view_pure_rotation_is_typed_failure() -> None:
     X = _scene()
-    T21 = rt_to_T(so3_exp_small(np.array([0.0, 0.08, 0.02])), np.zeros(3))
+    T21 = se3_matrix(so3_exp(np.array([0.0, 0.08, 0.02])), np.zeros(3))
     u1, u2 = _views(T21, X)
     res = two_view_init(u1, u2, K)
     assert res.status is TwoViewStatus.PURE_ROTATION
@@ -71,7 +72,7 @@ def test_two_view_too_few_points_and_bad_shapes() -> None:
 def test_triangulation_is_exact_and_flags_points_behind() -> None:
     X = _scene(100)
     T1 = np.eye(4)
-    T2 = rt_to_T(so3_exp_small(np.array([0.01, 0.03, 0.0])), np.array([-0.5, 0.0, 0.1]))
+    T2 = se3_matrix(so3_exp(np.array([0.01, 0.03, 0.0])), np.array([-0.5, 0.0, 0.1]))
     x1 = pixels_to_normalized(project(K, T1, X)[0], K)
     x2 = pixels_to_normalized(project(K, T2, X)[0], K)
     tri = triangulate(T1, T2, x1, x2, min_parallax_deg=0.1, max_reproj_px=0.01, focal_px=500)
@@ -88,7 +89,7 @@ def test_triangulation_is_exact_and_flags_points_behind() -> None:
 
 def test_pnp_exact_and_huber_refinement() -> None:
     X = _scene(200, seed=3)
-    T = rt_to_T(so3_exp_small(np.array([0.1, -0.2, 0.05])), np.array([0.4, 0.2, -0.3]))
+    T = se3_matrix(so3_exp(np.array([0.1, -0.2, 0.05])), np.array([0.4, 0.2, -0.3]))
     u, _ = project(K, T, X)
     rng = np.random.default_rng(1)
     u_bad = u.copy()
@@ -98,7 +99,7 @@ def test_pnp_exact_and_huber_refinement() -> None:
     assert res.status is PnPStatus.OK
     assert np.abs(res.T_cam_world - T).max() < 1e-6
     assert not res.inliers[out].any()
-    T0 = rt_to_T(so3_exp_small(np.array([0.02, 0.0, -0.01])), np.array([0.05, 0.0, 0.02])) @ T
+    T0 = se3_matrix(so3_exp(np.array([0.02, 0.0, -0.01])), np.array([0.05, 0.0, 0.02])) @ T
     Tr = refine_pose_huber(T0, X, u, K)
     assert np.abs(Tr - T).max() < 1e-8
     assert solve_pnp(X[:4], u[:4], K).status is PnPStatus.TOO_FEW_POINTS
@@ -108,7 +109,7 @@ def test_pnp_exact_and_huber_refinement() -> None:
 def test_ground_plane_recovers_known_plane_and_height(height: float) -> None:
     rng = np.random.default_rng(5)
     # camera frame: y down; a plane tilted by -3 deg about x, 'height' below the camera
-    R = so3_exp_small(np.array([np.radians(-3.0), 0.0, 0.0]))  # ground falls away
+    R = so3_exp(np.array([np.radians(-3.0), 0.0, 0.0]))  # ground falls away
     n_down = R @ np.array([0.0, 1.0, 0.0])
     ground_xz = rng.uniform([-5, 2], [5, 30], (300, 2))
     e1 = R @ np.array([1.0, 0, 0])
@@ -129,5 +130,5 @@ def test_ground_plane_typed_failure_without_points_below() -> None:
 
 
 def test_invert_T_roundtrip() -> None:
-    T = rt_to_T(so3_exp_small(np.array([0.3, -0.2, 0.1])), np.array([1.0, 2.0, 3.0]))
-    assert np.allclose(invert_T(T) @ T, np.eye(4))
+    T = se3_matrix(so3_exp(np.array([0.3, -0.2, 0.1])), np.array([1.0, 2.0, 3.0]))
+    assert np.allclose(se3_matrix_inverse(T) @ T, np.eye(4))

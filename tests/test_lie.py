@@ -18,10 +18,12 @@ from amrvio.types.lie import (
     SO3,
     Sim3,
     hat,
+    interpolate_se3,
     matrix_to_quat_wxyz,
     quat_wxyz_to_matrix,
     so3_exp,
     so3_log,
+    transform_points,
 )
 
 finite = st.floats(-3.0, 3.0, allow_nan=False, allow_infinity=False)
@@ -182,3 +184,70 @@ def test_values_are_immutable() -> None:
         T.t[0] = 1.0
     with pytest.raises(AttributeError):
         T.t = np.zeros(3)
+
+
+def _random_se3(rng: np.random.Generator) -> SE3:
+    return SE3.exp(np.r_[rng.normal(0, 2.0, 3), rng.normal(0, 0.8, 3)])
+
+
+def test_interpolate_se3_matches_scipy_slerp_and_linear_translation() -> None:
+    from scipy.spatial.transform import Slerp
+
+    rng = np.random.default_rng(4)
+    A = np.stack([_random_se3(rng).matrix() for _ in range(20)])
+    B = np.stack([_random_se3(rng).matrix() for _ in range(20)])
+    alpha = rng.uniform(0, 1, 20)
+    out = interpolate_se3(A, B, alpha)
+    for i in range(20):
+        slerp = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([A[i, :3, :3], B[i, :3, :3]])))
+        np.testing.assert_allclose(out[i, :3, :3], slerp([alpha[i]]).as_matrix()[0], atol=1e-10)
+        t = (1 - alpha[i]) * A[i, :3, 3] + alpha[i] * B[i, :3, 3]
+        np.testing.assert_allclose(out[i, :3, 3], t, atol=1e-12)
+        np.testing.assert_array_equal(out[i, 3], [0, 0, 0, 1])
+    np.testing.assert_allclose(interpolate_se3(A, B, np.zeros(20)), A, atol=1e-12)
+    np.testing.assert_allclose(interpolate_se3(A, B, np.ones(20)), B, atol=1e-9)
+    # one pair: rotation about z by 2 theta, halfway is theta (closed form)
+    R2 = SE3(SO3.exp([0, 0, 1.2]), np.array([2.0, 0, 0])).matrix()
+    mid = interpolate_se3(np.eye(4), R2, 0.5)
+    np.testing.assert_allclose(mid, SE3(SO3.exp([0, 0, 0.6]), np.array([1.0, 0, 0])).matrix(),
+                               atol=1e-12)
+    with pytest.raises(ShapeError):
+        interpolate_se3(A, B[:3], alpha)
+
+
+def test_transform_points_single_and_per_point() -> None:
+    rng = np.random.default_rng(5)
+    T = _random_se3(rng)
+    P = rng.normal(0, 3, (7, 3))
+    np.testing.assert_allclose(transform_points(T.matrix(), P), T.act(P), atol=1e-12)
+    Ts = np.stack([_random_se3(rng).matrix() for _ in range(7)])
+    ref = np.stack([Ts[i, :3, :3] @ P[i] + Ts[i, :3, 3] for i in range(7)])
+    np.testing.assert_allclose(transform_points(Ts, P), ref, atol=1e-12)
+
+
+def test_sim3_acts_on_poses_and_round_trips_its_parts() -> None:
+    rng = np.random.default_rng(6)
+    for _ in range(10):
+        S = Sim3.exp(np.r_[rng.normal(0, 1, 6), rng.normal(0, 0.7)])
+        S2 = Sim3.exp(np.r_[rng.normal(0, 1, 6), rng.normal(0, 0.7)])
+        T = _random_se3(rng)
+        # closed form: the 4x4 product S T has rotation block s R_S R_T
+        M = S.matrix() @ T.matrix()
+        got = S.transform_pose(T)
+        np.testing.assert_allclose(got.R, M[:3, :3] / S.s, atol=1e-12)
+        np.testing.assert_allclose(got.t, M[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(S.transform_pose_matrix(T.matrix()), got.matrix(), atol=0)
+        # the camera centre moves as a point
+        np.testing.assert_allclose(got.t, S.act(T.t), atol=1e-12)
+        # composition and inverse agree with acting twice / undoing
+        np.testing.assert_allclose((S @ S2).transform_pose(T).matrix(),
+                                   S.transform_pose(S2.transform_pose(T)).matrix(), atol=1e-10)
+        np.testing.assert_allclose(S.inverse().transform_pose(got).matrix(), T.matrix(), atol=1e-10)
+        s, R, t = S.srt()
+        back = Sim3.from_srt(s, R, t)
+        np.testing.assert_array_equal(back.matrix(), S.matrix())
+        np.testing.assert_allclose(back.act(T.t), s * (R @ T.t) + t, atol=1e-12)
+    with pytest.raises(ShapeError):
+        Sim3.from_srt(0.0, np.eye(3), np.zeros(3))
+    with pytest.raises(ShapeError):
+        Sim3.from_srt(1.0, 2.0 * np.eye(3), np.zeros(3))

@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 from amrvio.estimator.camera_height import HeightEstimate, estimate_height, smooth_scales
-from amrvio.estimator.local_ba import BAProblem, solve_ba_gtsam, solve_ba_scipy
-from amrvio.geometry._common import project, se3_exp
+from amrvio.estimator.local_ba import BAProblem, BAStatus, solve_ba_gtsam, solve_ba_scipy
+from amrvio.estimator.mapper import Mapper, MapperConfig, TriangulationReport
 from amrvio.geometry.ground_plane import PlaneStatus
+from amrvio.geometry.projection import project
+from amrvio.types.lie import SE3, se3_matrix
 
 K = np.array([[500.0, 0, 320.0], [0, 500.0, 240.0], [0, 0, 1]])
 
@@ -15,7 +17,7 @@ K = np.array([[500.0, 0, 320.0], [0, 500.0, 240.0], [0, 0, 1]])
 def _problem(noise_px: float, seed: int = 0) -> tuple[BAProblem, np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     nk = 5
-    T = np.stack([np.linalg.inv(se3_exp(np.r_[0.1 * i, 0, 0.5 * i, 0, 0.02 * i, 0]))
+    T = np.stack([np.linalg.inv(SE3.exp(np.r_[0.1 * i, 0, 0.5 * i, 0, 0.02 * i, 0]).matrix())
                   for i in range(nk)])
     X = rng.uniform([-4, -3, 6], [4, 3, 15], (150, 3))
     oc, op, ou = [], [], []
@@ -26,7 +28,7 @@ def _problem(noise_px: float, seed: int = 0) -> tuple[BAProblem, np.ndarray, np.
         ou.append(uv + rng.normal(0, noise_px, uv.shape) if noise_px else uv)
     Tn = T.copy()
     for i in range(2, nk):
-        Tn[i] = se3_exp(rng.normal(0, 0.01, 6)) @ T[i]
+        Tn[i] = SE3.exp(rng.normal(0, 0.01, 6)).matrix() @ T[i]
     fixed = np.zeros(nk, dtype=bool)
     fixed[:2] = True
     prob = BAProblem(Tn, fixed, X + rng.normal(0, 0.05, X.shape), np.array(oc), np.array(op),
@@ -65,3 +67,83 @@ def test_camera_height_scale_from_ground_points() -> None:
     s = smooth_scales([est, bad, HeightEstimate(20, PlaneStatus.OK, 0.5, 3.5, 100)], 30, 1)
     assert s.shape == (30,) and np.all(np.isfinite(s))
     assert abs(s[0] - 3.4) < 1e-9  # median of the window around the first keyframe
+
+
+def _mapper_with_window(noise_px: float, n_bad: int = 0, seed: int = 3) -> tuple[Mapper, np.ndarray]:
+    """Five keyframes seeing 150 points (world truth returned); the map starts perturbed and
+    the first ``n_bad`` points have one observation moved by 30 px."""
+    prob, T, X = _problem(noise_px, seed)
+    mp = Mapper(K, MapperConfig())
+    m = mp.map
+    ids = np.arange(len(X), dtype=np.int64)
+    for i in range(len(T)):
+        uv = prob.obs_px[prob.obs_cam == i].copy()
+        if i == 3:
+            uv[:n_bad, 1] += 30.0
+        m.add_keyframe(10 * i, prob.T_cam_world[i], ids, uv)
+    m.set_points(ids, prob.points)
+    return mp, X
+
+
+def test_local_ba_reports_what_it_did() -> None:
+    mp, X = _mapper_with_window(0.3, n_bad=6)
+    rep = mp.local_ba()
+    assert rep.status is BAStatus.OK and rep.ok
+    assert (rep.n_keyframes, rep.n_points, rep.n_observations) == (5, 150, 750)
+    assert rep.iterations >= 1
+    assert rep.initial_rms_px is not None and rep.final_rms_px is not None
+    assert rep.final_rms_px < rep.initial_rms_px
+    # the six corrupted points are culled, and they are counted
+    assert rep.n_outliers >= 6
+    assert not mp.map.points_of(np.arange(6, dtype=np.int64)).any()
+    kept = mp.map.points_of(np.arange(150, dtype=np.int64))
+    assert rep.n_outliers == 150 - int(kept.sum())
+
+
+def test_local_ba_failure_reasons() -> None:
+    mp = Mapper(K, MapperConfig())
+    ids = np.arange(5, dtype=np.int64)
+    uv = np.full((5, 2), 100.0)
+    mp.map.add_keyframe(0, np.eye(4), ids, uv)
+    mp.map.add_keyframe(1, np.eye(4), ids, uv)
+    mp.map.set_points(ids, np.tile([0.0, 0.0, 5.0], (5, 1)))
+    rep = mp.local_ba()
+    assert rep.status is BAStatus.TOO_FEW_POINTS and not rep.ok
+    assert rep.n_points == 5 and rep.initial_rms_px is None and rep.final_rms_px is None
+    # points seen by only one keyframe of the window: nothing to adjust
+    mp1 = Mapper(K, MapperConfig())
+    ids = np.arange(20, dtype=np.int64)
+    mp1.map.add_keyframe(0, np.eye(4), ids, np.full((20, 2), 100.0))
+    mp1.map.set_points(ids, np.tile([0.0, 0.0, 5.0], (20, 1)))
+    assert mp1.local_ba().status is BAStatus.TOO_FEW_POINTS
+
+
+def test_triangulate_new_counts_candidates_and_rejections_by_cause() -> None:
+    rng = np.random.default_rng(9)
+    T1 = se3_matrix(np.eye(3), np.array([-1.0, 0.0, 0.0]))  # camera 2 one unit right of camera 1
+    n_good, n_far, n_bad, n_behind = 30, 7, 5, 4
+    n = n_good + n_far + n_bad + n_behind
+    depth = np.r_[rng.uniform(5, 10, n_good), np.full(n_far, 1000.0),
+                  rng.uniform(5, 10, n_bad + n_behind)]
+    P = np.column_stack([rng.uniform(-0.3, 0.3, n) * depth, rng.uniform(-0.2, 0.2, n) * depth,
+                         depth])
+    uv0, _ = project(K, np.eye(4), P)
+    uv1, _ = project(K, T1, P)
+    uv1[n_good + n_far: n_good + n_far + n_bad, 1] += 20.0  # off the epipolar line
+    behind = slice(n - n_behind, n)
+    uv1[behind, 0] = 2 * uv0[behind, 0] - uv1[behind, 0]  # flow the wrong way: rays meet behind
+    # two more tracks that are no candidates: no earlier keyframe, and already a point
+    ids = np.arange(n + 2, dtype=np.int64)
+    first_kf = np.r_[np.zeros(n, dtype=np.int64), -1, 0]
+    first_uv = np.vstack([uv0, uv0[:2]])
+    uv = np.vstack([uv1, uv1[:2]])
+    mp = Mapper(K, MapperConfig())
+    mp.map.add_keyframe(0, np.eye(4), ids, first_uv)
+    mp.map.add_keyframe(3, T1, ids, uv)
+    mp.map.set_points(ids[-1:], np.zeros((1, 3)))
+    rep = mp.triangulate_new(1, ids, first_kf, first_uv, uv, n + 2)
+    assert rep == TriangulationReport(n_candidates=n, n_created=n_good, n_behind_camera=n_behind,
+                                      n_low_parallax=n_far, n_large_reprojection=n_bad)
+    made = mp.map.points_of(ids[:n])
+    assert made[:n_good].all() and not made[n_good:].any()
+    np.testing.assert_allclose(mp.map.xyz[:n_good], P[:n_good], rtol=1e-8)

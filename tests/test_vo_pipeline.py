@@ -9,9 +9,11 @@ import pytest
 from skimage import data as skdata
 
 from amrvio.config import PipelineConfig
-from amrvio.geometry._common import invert_T, rt_to_T, so3_exp_small
 from amrvio.pipeline.pipeline import Pipeline
 from amrvio.pipeline.records import PoseStatus
+from amrvio.types.lie import se3_matrix as rt_to_T
+from amrvio.types.lie import se3_matrix_inverse as invert_T
+from amrvio.types.lie import so3_exp as so3_exp_small
 
 W, H = 320, 240
 K = np.array([[260.0, 0, 159.5], [0, 260.0, 119.5], [0, 0, 1]])

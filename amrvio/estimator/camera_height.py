@@ -13,6 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.geometry.ground_plane import PlaneStatus, fit_ground_plane
+from amrvio.geometry.projection import MIN_DEPTH
+from amrvio.types.lie import transform_points
 
 F64 = NDArray[np.float64]
 NEAR_DEPTH = 8.0
@@ -56,8 +58,8 @@ def height_at_keyframe(frame_index: int, T_cam_world: F64, points_world: F64,
                        seed: int = 0) -> HeightEstimate:
     """The reading of one keyframe (pose 4x4 ``T_cam_world``) from the (N, 3) map points it
     sees, in global units: a map segment whose unit is ``segment_scale`` global units."""
-    Pc = points_world @ T_cam_world[:3, :3].T + T_cam_world[:3, 3]
-    Pc = Pc[Pc[:, 2] > 0]
+    Pc = transform_points(T_cam_world, points_world)
+    Pc = Pc[Pc[:, 2] > MIN_DEPTH]
     est = estimate_height(frame_index, Pc, camera_height_m, seed=seed)
     if np.isfinite(est.scale):
         est = HeightEstimate(est.frame_index, est.status, est.height_map * segment_scale,

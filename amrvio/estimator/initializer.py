@@ -17,7 +17,6 @@ from numpy.typing import NDArray
 from amrvio.estimator.mapper import Mapper
 from amrvio.frontend.tracker import Observations
 from amrvio.frontend.tracks import TrackSet
-from amrvio.geometry._common import se3_exp
 from amrvio.geometry.pnp import solve_pnp
 from amrvio.geometry.two_view import TwoViewConfig, TwoViewResult, TwoViewStatus, two_view_init
 from amrvio.types.lie import SE3
@@ -160,7 +159,7 @@ class Initializer:
         # per-frame velocity from the init baseline (geometric mean of the motion)
         n_frames = max(index - self.ref_index, 1)
         xi = SE3.from_matrix(T1).log() / n_frames
-        velocity = se3_exp(np.asarray(xi, dtype=np.float64))
+        velocity = SE3.exp(np.asarray(xi, dtype=np.float64)).matrix()
         self._last = None
         return NewMap(kf0.kf_id, kf1.kf_id, T1.copy(), velocity, tuple(between))
 

@@ -9,14 +9,46 @@ Gauge: poses flagged ``fixed`` are held constant (fix two poses in monocular BA:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
-from amrvio.geometry._common import F64, se3_exp
+from amrvio.geometry.projection import project, project_jacobian
+from amrvio.types.lie import SE3
 
+F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
+
+
+class BAStatus(Enum):
+    """Outcome of one local bundle adjustment."""
+
+    OK = "ok"
+    TOO_FEW_POINTS = "too_few_points"  # fewer than the minimum points seen twice in the window
+    TOO_FEW_KEYFRAMES = "too_few_keyframes"  # fewer than two keyframes observe those points
+    SOLVER_FAILED = "solver_failed"  # the back-end raised (e.g. GTSAM indeterminant system)
+
+
+@dataclass(frozen=True, slots=True)
+class BAReport:
+    """What one local BA did. Sizes of the problem, the solver's iterations, the RMS
+    reprojection error (pixels, no robust loss) before and after (None when it did not run),
+    and ``n_outliers``: points culled afterwards (large residual or behind a camera)."""
+
+    status: BAStatus
+    n_keyframes: int
+    n_points: int
+    n_observations: int = 0
+    iterations: int = 0
+    initial_rms_px: float | None = None
+    final_rms_px: float | None = None
+    n_outliers: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return self.status is BAStatus.OK
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,25 +78,25 @@ class BAProblem:
 
 @dataclass(frozen=True, slots=True)
 class BAResult:
-    """Optimised poses (K, 4, 4) and points (P, 3); ``residual_px`` (M,) final pixel errors."""
+    """Optimised poses (K, 4, 4) and points (P, 3); ``residual_px`` (M,) final pixel errors,
+    ``initial_residual_px`` (M,) those of the starting point."""
 
     T_cam_world: F64
     points: F64
     residual_px: F64
     iterations: int
+    initial_residual_px: F64
 
 
 def reprojection_errors(prob: BAProblem, T: F64, X: F64) -> tuple[F64, F64]:
     """(M, 2) residuals (projection - measurement) and (M,) depths."""
-    R = T[prob.obs_cam, :3, :3]
-    t = T[prob.obs_cam, :3, 3]
-    pc = np.einsum("mij,mj->mi", R, X[prob.obs_point]) + t
-    z = pc[:, 2]
-    zs = np.where(np.abs(z) < 1e-9, 1e-9, z)
-    K = prob.K
-    u = K[0, 0] * pc[:, 0] / zs + K[0, 2]
-    v = K[1, 1] * pc[:, 1] / zs + K[1, 2]
-    return np.column_stack([u, v]) - prob.obs_px, z
+    uv, z = project(prob.K, T[prob.obs_cam], X[prob.obs_point])
+    return uv - prob.obs_px, z
+
+
+def _pixel_errors(prob: BAProblem, T: F64, X: F64) -> F64:
+    r, _ = reprojection_errors(prob, T, X)
+    return np.asarray(np.linalg.norm(r, axis=1), dtype=np.float64)
 
 
 def solve_ba_scipy(prob: BAProblem, max_iterations: int = 10) -> BAResult:
@@ -74,18 +106,17 @@ def solve_ba_scipy(prob: BAProblem, max_iterations: int = 10) -> BAResult:
 
     k = prob.T_cam_world.shape[0]
     free = np.flatnonzero(~prob.fixed)
-    pose_col = -np.ones(k, dtype=np.int64)
+    pose_col = np.zeros(k, dtype=np.int64)  # first column of each free pose
     pose_col[free] = np.arange(len(free)) * 6
     n_pose = 6 * len(free)
     n_pts = len(prob.points)
     m = len(prob.obs_cam)
     T0 = prob.T_cam_world.copy()
-    fx, fy = prob.K[0, 0], prob.K[1, 1]
 
     def unpack(x: F64) -> tuple[F64, F64]:
         T = T0.copy()
         for i, c in zip(free, pose_col[free], strict=True):
-            T[i] = se3_exp(x[c : c + 6]) @ T0[i]
+            T[i] = SE3.exp(x[c : c + 6]).matrix() @ T0[i]
         return T, x[n_pose:].reshape(n_pts, 3)
 
     def fun(x: F64) -> F64:
@@ -97,24 +128,9 @@ def solve_ba_scipy(prob: BAProblem, max_iterations: int = 10) -> BAResult:
 
     def jac(x: F64) -> csr_matrix:
         T, X = unpack(x)
-        R = T[prob.obs_cam, :3, :3]
-        pc = np.einsum("mij,mj->mi", R, X[prob.obs_point]) + T[prob.obs_cam, :3, 3]
-        z = np.where(np.abs(pc[:, 2]) < 1e-9, 1e-9, pc[:, 2])
-        iz = 1.0 / z
-        Jp = np.zeros((m, 2, 3))
-        Jp[:, 0, 0] = fx * iz
-        Jp[:, 0, 2] = -fx * pc[:, 0] * iz * iz
-        Jp[:, 1, 1] = fy * iz
-        Jp[:, 1, 2] = -fy * pc[:, 1] * iz * iz
-        Jx = Jp @ R  # d/d(point)
-        Xc, Yc, Zc = pc[:, 0], pc[:, 1], pc[:, 2]
-        Sk = np.zeros((m, 3, 3))  # -[pc]x
-        Sk[:, 0, 1], Sk[:, 0, 2] = Zc, -Yc
-        Sk[:, 1, 0], Sk[:, 1, 2] = -Zc, Xc
-        Sk[:, 2, 0], Sk[:, 2, 1] = Yc, -Xc
-        Jxi = np.concatenate([Jp, Jp @ Sk], axis=2)  # (M, 2, 6)
+        Jxi, Jx = project_jacobian(prob.K, T[prob.obs_cam], X[prob.obs_point])
         pcol = pose_col[prob.obs_cam]
-        has = pcol >= 0
+        has = ~prob.fixed[prob.obs_cam]
         r_pose = np.repeat(np.arange(2 * m).reshape(m, 2)[has], 6, axis=1)
         c_pose = (pcol[has][:, None, None] + np.arange(6)[None, None, :]).repeat(2, axis=1)
         c_pt = (n_pose + 3 * prob.obs_point[:, None, None] + np.arange(3)[None, None, :]).repeat(
@@ -124,19 +140,20 @@ def solve_ba_scipy(prob: BAProblem, max_iterations: int = 10) -> BAResult:
         cc = np.concatenate([c_pose.ravel(), c_pt.ravel()])
         return csr_matrix((data, (rr, cc)), shape=(2 * m, n_pose + 3 * n_pts))
 
+    initial = _pixel_errors(prob, prob.T_cam_world, prob.points)
     x0 = np.concatenate([np.zeros(n_pose), prob.points.ravel()])
     res = least_squares(fun, x0, jac=jac, method="trf", loss="huber", f_scale=prob.huber_px,
                         tr_solver="lsmr", max_nfev=max_iterations, x_scale=1.0,
                         xtol=1e-10, ftol=1e-6)
     T, X = unpack(res.x)
-    r, _ = reprojection_errors(prob, T, X)
-    return BAResult(T, X, np.linalg.norm(r, axis=1), int(res.nfev))
+    return BAResult(T, X, _pixel_errors(prob, T, X), int(res.nfev), initial)
 
 
 def solve_ba_gtsam(prob: BAProblem, max_iterations: int = 10) -> BAResult:
     """GTSAM LM with SEQUENTIAL_CHOLESKY; Huber-robust GenericProjectionFactorCal3_S2."""
     import gtsam
 
+    initial = _pixel_errors(prob, prob.T_cam_world, prob.points)
     K = prob.K
     cal = gtsam.Cal3_S2(K[0, 0], K[1, 1], 0.0, K[0, 2], K[1, 2])
     noise = gtsam.noiseModel.Robust.Create(
@@ -176,8 +193,8 @@ def solve_ba_gtsam(prob: BAProblem, max_iterations: int = 10) -> BAResult:
         T[i, :3, :3] = Twc[:3, :3].T
         T[i, :3, 3] = -Twc[:3, :3].T @ Twc[:3, 3]
     X = np.array([out.atPoint3(lk[j]) for j in range(n_pts)]).reshape(n_pts, 3)
-    r, _ = reprojection_errors(prob, T, X)
-    return BAResult(T, X, np.linalg.norm(r, axis=1), int(opt.iterations()))
+    return BAResult(T, X, _pixel_errors(prob, T, X), int(opt.iterations()), initial)
 
 
-__all__ = ["BAProblem", "BAResult", "reprojection_errors", "solve_ba_gtsam", "solve_ba_scipy"]
+__all__ = ["BAProblem", "BAReport", "BAResult", "BAStatus", "reprojection_errors",
+           "solve_ba_gtsam", "solve_ba_scipy"]

@@ -15,12 +15,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from amrvio.estimator.mapper import BAReport, Mapper, MapperConfig
+from amrvio.estimator.mapper import BAReport, Mapper, MapperConfig, TriangulationReport
 from amrvio.frontend.anchor import AnchorConfig, AnchorImage, retrack_from_anchors
 from amrvio.frontend.keyframe_policy import KeyframePolicyConfig, KeyframeReason, keyframe_decision
 from amrvio.frontend.tracks import TrackSet
-from amrvio.geometry._common import invert_T
-from amrvio.types.lie import SO3, Sim3
+from amrvio.types.lie import SO3, Sim3, se3_matrix_inverse
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
@@ -39,13 +38,13 @@ class MappingConfig:
 @dataclass(frozen=True, slots=True)
 class KeyframeReport:
     """A keyframe: its id in its segment, why it was made (None: the second keyframe of a new
-    map, made by the initializer), tracks dropped by anchor re-tracking, points triangulated,
-    and the local BA report (None for the keyframes of a new map)."""
+    map, made by the initializer), tracks dropped by anchor re-tracking, the triangulation and the
+    local BA reports (None for the keyframes of a new map)."""
 
     kf_id: int
     reason: KeyframeReason | None
     n_retrack_dropped: int
-    n_new_points: int
+    triangulation: TriangulationReport | None
     ba: BAReport | None
 
 
@@ -60,11 +59,7 @@ class Segment:
     def pose_in_world(self, T_cam_seg: F64) -> F64:
         """4x4 ``T_world_cam`` of a camera pose ``T_cam_seg`` (4x4) of this segment: the
         rotation is mapped by R, the position by the similarity."""
-        sim = self.world_from_segment
-        T_wc = invert_T(T_cam_seg)
-        T_wc[:3, 3] = sim.s * sim.R @ T_wc[:3, 3] + sim.t
-        T_wc[:3, :3] = sim.R @ T_wc[:3, :3]
-        return T_wc
+        return self.world_from_segment.transform_pose_matrix(se3_matrix_inverse(T_cam_seg))
 
     def points_in_world(self, scale: float = 1.0) -> F64:
         """(P, 3) map points in the global world, times ``scale``."""
@@ -127,11 +122,11 @@ class LocalMapping:
             self.timings["anchor"] = self.timings.get("anchor", 0.0) + time.perf_counter() - t0
         kf = m.add_keyframe(index, T_cam_world, tracks.ids, tracks.pts)
         # triangulate tracks seen in an earlier keyframe and without a point yet
-        n_new = mapper.triangulate_new(kf.kf_id, tracks.ids, tracks.first_kf, tracks.first_uv,
+        tri = mapper.triangulate_new(kf.kf_id, tracks.ids, tracks.first_kf, tracks.first_uv,
                                        tracks.pts, tracks.next_id)
         ba = mapper.local_ba()
         return m.keyframes[kf.kf_id].T_cam_world.copy(), KeyframeReport(kf.kf_id, reason, n_drop,
-                                                                        n_new, ba)
+                                                                        tri, ba)
 
     def seal_keyframe(self, kf_id: int, img: U8, tracks: TrackSet) -> None:
         """Record the keyframe's final observations (after detection added tracks) and keep its

@@ -16,12 +16,14 @@ from numpy.typing import NDArray
 
 from amrvio.estimator.local_ba import (
     BAProblem,
+    BAReport,
     BAResult,
+    BAStatus,
     solve_ba_gtsam,
     solve_ba_scipy,
 )
 from amrvio.estimator.vo_map import VoMap
-from amrvio.geometry._common import pixels_to_normalized
+from amrvio.geometry.projection import MIN_DEPTH, pixels_to_normalized, project
 from amrvio.geometry.triangulation import triangulate
 
 F64 = NDArray[np.float64]
@@ -29,6 +31,7 @@ I64 = NDArray[np.int64]
 log = logging.getLogger(__name__)
 
 BA_BACKENDS = ("gtsam", "scipy")
+BA_MIN_POINTS = 10  # a local BA needs this many points seen by two keyframes of the window
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,13 +51,17 @@ class MapperConfig:
 
 
 @dataclass(frozen=True, slots=True)
-class BAReport:
-    """What one local BA did: keyframes and points in the problem, points culled."""
+class TriangulationReport:
+    """What one ``Mapper.triangulate_new`` did. ``n_candidates``: tracks seen in an earlier
+    keyframe and without a point; ``n_created``: new map points. Each rejected candidate is
+    counted once, for the first failed check in this order: behind a camera, parallax below
+    ``tri_min_parallax_deg``, reprojection error above ``tri_max_reproj_px``."""
 
-    n_keyframes: int
-    n_points: int
-    n_culled: int
-    ok: bool
+    n_candidates: int
+    n_created: int
+    n_behind_camera: int
+    n_low_parallax: int
+    n_large_reprojection: int
 
 
 class Mapper:
@@ -72,23 +79,25 @@ class Mapper:
         self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - t0
 
     def triangulate_new(self, kf_id: int, track_ids: I64, first_kf: I64, first_uv: F64,
-                        uv: F64, n_tracks_total: int) -> int:
+                        uv: F64, n_tracks_total: int) -> TriangulationReport:
         """Triangulate tracks seen in an earlier keyframe (``first_kf`` (N,), ``first_uv``
         (N, 2)) and now at ``uv`` (N, 2) in keyframe ``kf_id``; those without a point yet.
-        Returns the number of new points."""
+        ``first_kf`` < 0: the track has no earlier keyframe (not a candidate)."""
         t0 = time.perf_counter()
         m = self.map
         T_cw = m.keyframes[kf_id].T_cam_world
         m.ensure_capacity(n_tracks_total)
         has = m.points_of(track_ids)
         cand = np.flatnonzero(~has & (first_kf >= 0) & (first_kf < kf_id))
-        n_new = 0
+        n_new = n_behind = n_parallax = n_reproj = 0
         if len(cand):
             focal = 0.5 * (self.K[0, 0] + self.K[1, 1])
             xn2 = pixels_to_normalized(uv[cand], self.K)
             xn1 = pixels_to_normalized(first_uv[cand], self.K)
             X = np.zeros((len(cand), 3))
             valid = np.zeros(len(cand), dtype=bool)
+            in_front = np.zeros(len(cand), dtype=bool)
+            parallax_ok = np.zeros(len(cand), dtype=bool)
             for fk in np.unique(first_kf[cand]):
                 sel = first_kf[cand] == fk
                 tri = triangulate(m.keyframes[int(fk)].T_cam_world, T_cw, xn1[sel], xn2[sel],
@@ -96,10 +105,15 @@ class Mapper:
                                   max_reproj_px=self.cfg.tri_max_reproj_px, focal_px=focal)
                 X[sel] = tri.points_world
                 valid[sel] = tri.valid
+                in_front[sel] = tri.in_front
+                parallax_ok[sel] = tri.parallax_deg >= self.cfg.tri_min_parallax_deg
             m.set_points(track_ids[cand[valid]], X[valid])
             n_new = int(valid.sum())
+            n_behind = int((~in_front).sum())
+            n_parallax = int((in_front & ~parallax_ok).sum())
+            n_reproj = int((in_front & parallax_ok & ~valid).sum())
         self._toc("triangulate", t0)
-        return n_new
+        return TriangulationReport(len(cand), n_new, n_behind, n_parallax, n_reproj)
 
     def local_ba(self) -> BAReport:
         """Bundle-adjust the newest keyframes and their points, then cull points with a
@@ -117,9 +131,10 @@ class Mapper:
         good = counts[inv] >= 2
         ids_all, cams, uvs = ids_all[good], cams[good], uvs[good]
         uniq2, inv2 = np.unique(ids_all, return_inverse=True)
-        if len(uniq2) < 10:
+        n_obs = len(ids_all)
+        if len(uniq2) < BA_MIN_POINTS:
             self._toc("ba", t0)
-            return BAReport(len(win), len(uniq2), 0, False)
+            return BAReport(BAStatus.TOO_FEW_POINTS, len(win), len(uniq2), n_obs)
         # gauge (7 DoF): hold the older keyframes fixed, at least two of them
         fixed_all = np.zeros(len(win), dtype=bool)
         fixed_all[: max(2, len(win) - cfg.ba_window)] = True
@@ -131,27 +146,27 @@ class Mapper:
             fixed[:2] = True
         if len(win) < 2:
             self._toc("ba", t0)
-            return BAReport(len(win), len(uniq2), 0, False)
+            return BAReport(BAStatus.TOO_FEW_KEYFRAMES, len(win), len(uniq2), n_obs)
         T = np.stack([k.T_cam_world for k in win])
         prob = BAProblem(T, fixed, m.xyz[uniq2].copy(), cams.astype(np.int64),
                          inv2.astype(np.int64), uvs, self.K, cfg.huber_px)
         out = self._solve(prob)
         if out is None:
             self._toc("ba", t0)
-            return BAReport(len(win), len(uniq2), 0, False)
+            return BAReport(BAStatus.SOLVER_FAILED, len(win), len(uniq2), n_obs)
         for i, k in enumerate(win):
             m.set_pose(k.kf_id, out.T_cam_world[i])
         m.xyz[uniq2] = out.points
         self._toc("ba", t0)
         # culling: points with a large residual or behind a camera
         t0 = time.perf_counter()
-        pc_z = np.einsum("mj,mj->m", out.T_cam_world[cams, 2, :3], out.points[inv2]) + \
-            out.T_cam_world[cams, 2, 3]
-        bad_obs = (out.residual_px > cfg.cull_px) | (pc_z <= 0)
+        _, z = project(self.K, out.T_cam_world[cams], out.points[inv2])
+        bad_obs = (out.residual_px > cfg.cull_px) | (z <= MIN_DEPTH)
         bad_pts = np.unique(inv2[bad_obs])
         m.remove_points(uniq2[bad_pts])
         self._toc("cull", t0)
-        return BAReport(len(win), len(uniq2), len(bad_pts), True)
+        return BAReport(BAStatus.OK, len(win), len(uniq2), n_obs, out.iterations,
+                        _rms(out.initial_residual_px), _rms(out.residual_px), len(bad_pts))
 
     def _solve(self, prob: BAProblem) -> BAResult | None:
         solver = solve_ba_scipy if self.cfg.ba_backend == "scipy" else solve_ba_gtsam
@@ -162,4 +177,9 @@ class Mapper:
             return None
 
 
-__all__ = ["BA_BACKENDS", "BAReport", "Mapper", "MapperConfig"]
+def _rms(err_px: F64) -> float:
+    return float(np.sqrt(np.mean(err_px * err_px))) if len(err_px) else 0.0
+
+
+__all__ = ["BA_BACKENDS", "BA_MIN_POINTS", "BAReport", "BAStatus", "Mapper", "MapperConfig",
+           "TriangulationReport"]

@@ -3,7 +3,9 @@
 Residual r(u) = I_c(w(u; xi)) - (a I_r(u) + b) with the warp w(u) = pi(K T_c_r d(u) K^-1 u);
 Gauss-Newton (J^T W J) dtheta = -J^T W r with Huber weights, coarse-to-fine over an image
 pyramid. Jacobians (seed §4): dr/da = -I_r(u), dr/db = -1,
-dr/dxi = grad I_c(u') d(pi)/dP dP/dxi with dP/dxi = [I, -[P]x] (left perturbation).
+dr/dxi = grad I_c(u') d(uv)/d(xi) (geometry.projection.project_jacobian, left perturbation,
+fused with the gradient in ``_gradient_pose_jacobian``). Near-zero depth: pixels whose warped
+point has Z <= geometry.projection.MIN_DEPTH are dropped.
 """
 
 from __future__ import annotations
@@ -16,7 +18,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
-from amrvio.geometry._common import check_matrix, check_points, se3_exp
+from amrvio.geometry.checks import check_matrix, check_points
+from amrvio.geometry.projection import MIN_DEPTH
+from amrvio.types.lie import SE3, transform_points
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
@@ -73,6 +77,23 @@ def _pyramid(img: U8, levels: int) -> list[NDArray[np.float32]]:
     return pyr
 
 
+def _gradient_pose_jacobian(gx: F64, gy: F64, P_cam: F64, iz: F64, fx: float, fy: float) -> F64:
+    """(N, 6) d(I_c(uv))/d(xi) = [gx, gy] . d(uv)/d(xi) for camera points (N, 3), 1/Z ``iz``.
+
+    The chain rule of ``geometry.projection.project_jacobian`` (left perturbation, [rho, phi])
+    fused with the image gradient: 6 columns instead of a (N, 2, 6) block, in the operation
+    order the VO's figures were made with (tests check it against project_jacobian).
+    """
+    gP = np.column_stack([gx * fx * iz, gy * fy * iz,
+                          -(gx * fx * P_cam[:, 0] + gy * fy * P_cam[:, 1]) * iz * iz])
+    X, Y, Z = P_cam[:, 0], P_cam[:, 1], P_cam[:, 2]
+    # gP @ (-[P]x) for the rotation part
+    Jrot = np.column_stack([gP[:, 2] * Y - gP[:, 1] * Z,
+                            gP[:, 0] * Z - gP[:, 2] * X,
+                            gP[:, 1] * X - gP[:, 0] * Y])
+    return np.column_stack([gP, Jrot])
+
+
 def align_direct(
     img_ref: U8,
     img_cur: U8,
@@ -120,10 +141,11 @@ def align_direct(
         gy = cv2.Sobel(Ic, cv2.CV_32F, 0, 1, ksize=3, scale=1.0 / 8)
         h, w = Ic.shape
         for _ in range(cfg.iterations):
-            P = P_ref @ T[:3, :3].T + T[:3, 3]
+            P = transform_points(T, P_ref)
             z = P[:, 2]
-            ok = z > 1e-6
+            ok = z > MIN_DEPTH
             zs = np.where(ok, z, 1.0)
+            # the pinhole of geometry.projection.project, written as x / z (figures unchanged)
             uc = np.column_stack([fx * P[:, 0] / zs + cx, fy * P[:, 1] / zs + cy])
             ok &= (uc[:, 0] >= 1) & (uc[:, 0] < w - 2) & (uc[:, 1] >= 1) & (uc[:, 1] < h - 2)
             n_used = int(ok.sum())
@@ -132,16 +154,8 @@ def align_direct(
             Pk, zk, uk = P[ok], zs[ok], uc[ok]
             r = _sample(Ic, uk) - (a * Ir[ok] + b)  # seed §4 residual
             gxs, gys = _sample(gx, uk), _sample(gy, uk)
-            iz = 1.0 / zk
-            # d(pi)/dP rows, combined with the image gradient: (N, 3)
-            gP = np.column_stack([gxs * fx * iz, gys * fy * iz,
-                                  -(gxs * fx * Pk[:, 0] + gys * fy * Pk[:, 1]) * iz * iz])
-            X, Y, Z = Pk[:, 0], Pk[:, 1], Pk[:, 2]
-            # gP @ (-[P]x) for the rotation part
-            Jrot = np.column_stack([gP[:, 2] * Y - gP[:, 1] * Z,
-                                    gP[:, 0] * Z - gP[:, 2] * X,
-                                    gP[:, 1] * X - gP[:, 0] * Y])
-            J = np.column_stack([gP, Jrot, -Ir[ok], -np.ones(n_used)])  # dr/da=-I_r, dr/db=-1
+            J_xi = _gradient_pose_jacobian(gxs, gys, Pk, 1.0 / zk, fx, fy)
+            J = np.column_stack([J_xi, -Ir[ok], -np.ones(n_used)])  # dr/da=-I_r, dr/db=-1
             ar = np.abs(r)
             wgt = np.where(ar <= cfg.huber, 1.0, cfg.huber / np.maximum(ar, 1e-12))
             H = J.T @ (J * wgt[:, None])
@@ -154,7 +168,7 @@ def align_direct(
                 dx[:npar] = -np.linalg.solve(H[:npar, :npar] + 1e-9 * np.eye(npar), g[:npar])
             except np.linalg.LinAlgError:
                 return DirectResult(DirectStatus.DIVERGED, T, a, b, n_used, rms)
-            T = se3_exp(dx[:6]) @ T
+            T = SE3.exp(dx[:6]).matrix() @ T
             a += float(dx[6])
             b += float(dx[7])
             rms = float(np.sqrt(np.mean(r * r)))

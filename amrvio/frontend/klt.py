@@ -10,7 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
-from amrvio.geometry._common import project
+from amrvio.geometry.projection import project
 from amrvio.tracking.brightness import Invariance
 from amrvio.tracking.detect import DetectorConfig, detect_corners
 from amrvio.tracking.lk import EpipolarConfig, LkConfig, LkTracker, TrackResult

@@ -22,8 +22,9 @@ from numpy.typing import NDArray
 from amrvio.frontend.direct import DirectConfig, align_direct
 from amrvio.frontend.klt import KltConfig, KltResult, KltTracker, detect_bucketed, predict_tracks
 from amrvio.frontend.tracks import UNANCHORED, TrackSet
-from amrvio.geometry._common import invert_T, project
 from amrvio.geometry.pnp import solve_pnp
+from amrvio.geometry.projection import project
+from amrvio.types.lie import se3_matrix_inverse
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -244,7 +245,7 @@ class Tracker:
         tr.move(res.pts)
         tr.keep(res.ok & ~bad)
         self.prev_img = img
-        dT = T_cw @ invert_T(T_last)
+        dT = T_cw @ se3_matrix_inverse(T_last)
         if steps == 1:
             mot.velocity = dT
         mot.speeds.append(segment_scale * float(np.linalg.norm(dT[:3, 3])) / steps)

@@ -7,7 +7,7 @@ from enum import Enum
 
 import numpy as np
 
-from amrvio.geometry._common import F64, check_points
+from amrvio.geometry.checks import F64, check_points
 
 
 class PlaneStatus(Enum):

@@ -9,7 +9,9 @@ import cv2
 import numpy as np
 
 from amrvio.errors import ShapeError
-from amrvio.geometry._common import F64, check_matrix, check_points, project, rt_to_T, se3_exp
+from amrvio.geometry.checks import F64, check_matrix, check_points
+from amrvio.geometry.projection import MIN_DEPTH, project, project_jacobian
+from amrvio.types.lie import SE3, se3_matrix
 
 
 class PnPStatus(Enum):
@@ -45,32 +47,17 @@ def refine_pose_huber(
 ) -> F64:
     """Motion-only Gauss-Newton on reprojection error with Huber weights (IRLS).
 
-    Left perturbation T <- exp(xi) T, xi = [rho, phi]; d(Pc)/d(xi) = [I, -[Pc]x].
+    Left perturbation T <- exp(xi) T, xi = [rho, phi] (Jacobian: geometry.projection).
     """
     T = check_matrix("T_cam_world", T_cam_world, (4, 4)).copy()
     P = check_points("points_world", points_world, 3)
     u = check_points("pts_px", pts_px, 2)
     Km = check_matrix("K", K, (3, 3))
-    fx, fy = Km[0, 0], Km[1, 1]
+    n = len(P)
     for _ in range(iterations):
-        pc = P @ T[:3, :3].T + T[:3, 3]
-        z = np.maximum(pc[:, 2], 1e-6)
-        iz = 1.0 / z
-        proj = np.column_stack([fx * pc[:, 0] * iz + Km[0, 2], fy * pc[:, 1] * iz + Km[1, 2]])
+        proj = project(Km, T, P)[0]
         r = (proj - u).ravel()
-        n = len(P)
-        Jp = np.zeros((n, 2, 3))
-        Jp[:, 0, 0] = fx * iz
-        Jp[:, 0, 2] = -fx * pc[:, 0] * iz * iz
-        Jp[:, 1, 1] = fy * iz
-        Jp[:, 1, 2] = -fy * pc[:, 1] * iz * iz
-        X, Y, Z = pc[:, 0], pc[:, 1], pc[:, 2]
-        # d(Pc)/d(phi) = -[Pc]x
-        Jr = np.zeros((n, 3, 3))
-        Jr[:, 0, 1], Jr[:, 0, 2] = Z, -Y
-        Jr[:, 1, 0], Jr[:, 1, 2] = -Z, X
-        Jr[:, 2, 0], Jr[:, 2, 1] = Y, -X
-        J = np.concatenate([Jp, Jp @ Jr], axis=2).reshape(2 * n, 6)
+        J = project_jacobian(Km, T, P)[0].reshape(2 * n, 6)
         en = np.linalg.norm((proj - u), axis=1)
         w = np.where(en <= huber_px, 1.0, huber_px / np.maximum(en, 1e-12))
         w2 = np.repeat(w, 2)
@@ -80,7 +67,7 @@ def refine_pose_huber(
             dx = -np.linalg.solve(H + 1e-9 * np.eye(6), g)
         except np.linalg.LinAlgError:
             break
-        T = se3_exp(dx) @ T
+        T = SE3.exp(dx).matrix() @ T
         if np.linalg.norm(dx) < 1e-10:
             break
     return T
@@ -122,7 +109,7 @@ def solve_pnp(
     if not ok or idx is None:
         return PnPResult(PnPStatus.FAILED, np.eye(4), none)
     R, _ = cv2.Rodrigues(rvec)
-    T = rt_to_T(R, tvec.ravel())
+    T = se3_matrix(R, tvec.ravel())
     inl = np.zeros(n, dtype=bool)
     inl[idx.ravel()] = True
     if int(inl.sum()) < min_inliers:
@@ -130,7 +117,7 @@ def solve_pnp(
     T = refine_pose_huber(T, P[inl], u[inl], Km, huber_px=huber_px)
     proj, z = project(Km, T, P)
     err = np.linalg.norm(proj - u, axis=1)
-    inl = (err < ransac_thresh_px * 1.5) & (z > 0)
+    inl = (err < ransac_thresh_px * 1.5) & (z > MIN_DEPTH)
     if int(inl.sum()) < min_inliers:
         return PnPResult(PnPStatus.TOO_FEW_INLIERS, T, inl)
     return PnPResult(PnPStatus.OK, T, inl)

@@ -7,7 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from amrvio.errors import ShapeError
-from amrvio.geometry._common import F64, check_matrix, check_points, transform
+from amrvio.geometry.checks import F64, check_matrix, check_points
+from amrvio.geometry.projection import MIN_DEPTH, project
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,9 +63,10 @@ def triangulate(
     w = Xh[:, 3]
     finite = np.abs(w) > 1e-12
     X = np.where(finite[:, None], Xh[:, :3] / np.where(finite, w, 1.0)[:, None], 0.0)
-    p1 = transform(T1, X)
-    p2 = transform(T2, X)
-    in_front = finite & (p1[:, 2] > 0) & (p2[:, 2] > 0)
+    # reprojection in normalized coordinates (K = I)
+    xp1, z1 = project(np.eye(3), T1, X)
+    xp2, z2 = project(np.eye(3), T2, X)
+    in_front = finite & (z1 > MIN_DEPTH) & (z2 > MIN_DEPTH)
     # parallax angle between the two viewing rays at the point
     c1 = -T1[:3, :3].T @ T1[:3, 3]
     c2 = -T2[:3, :3].T @ T2[:3, 3]
@@ -74,10 +76,8 @@ def triangulate(
         np.linalg.norm(r1, axis=1) * np.linalg.norm(r2, axis=1) + 1e-300
     )
     parallax = np.degrees(np.arccos(np.clip(cosang, -1.0, 1.0)))
-    z1 = np.where(np.abs(p1[:, 2]) < 1e-12, 1e-12, p1[:, 2])
-    z2 = np.where(np.abs(p2[:, 2]) < 1e-12, 1e-12, p2[:, 2])
-    e1 = np.linalg.norm(p1[:, :2] / z1[:, None] - x1, axis=1)
-    e2 = np.linalg.norm(p2[:, :2] / z2[:, None] - x2, axis=1)
+    e1 = np.linalg.norm(xp1 - x1, axis=1)
+    e2 = np.linalg.norm(xp2 - x2, axis=1)
     err = np.maximum(e1, e2) * focal_px
     valid = in_front & (parallax >= min_parallax_deg) & (err <= max_reproj_px)
     return TriangulationResult(X, valid, in_front, parallax, err)
@@ -90,4 +90,4 @@ def camera_center(T_cam_world: F64) -> F64:
     return c
 
 
-__all__ = ["TriangulationResult", "camera_center", "transform", "triangulate"]
+__all__ = ["TriangulationResult", "camera_center", "triangulate"]

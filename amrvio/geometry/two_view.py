@@ -13,15 +13,10 @@ import cv2
 import numpy as np
 
 from amrvio.errors import ShapeError
-from amrvio.geometry._common import (
-    F64,
-    check_matrix,
-    check_points,
-    normalized_to_bearings,
-    pixels_to_normalized,
-    rt_to_T,
-)
+from amrvio.geometry.checks import F64, check_matrix, check_points
+from amrvio.geometry.projection import normalized_to_bearings, pixels_to_normalized
 from amrvio.geometry.triangulation import triangulate
+from amrvio.types.lie import se3_matrix
 
 
 class TwoViewStatus(Enum):
@@ -136,7 +131,7 @@ def two_view_init(
     par_in = float(np.median(_rotation_parallax_deg(b1[inl], b2[inl], R)))
     if par_in < cfg.min_parallax_deg:
         return fail(TwoViewStatus.LOW_PARALLAX, par_in, flow, inl)
-    T21 = rt_to_T(R, t)
+    T21 = se3_matrix(R, t)
     tri = triangulate(np.eye(4), T21, x1, x2, min_parallax_deg=cfg.min_point_parallax_deg,
                       max_reproj_px=cfg.max_reproj_px, focal_px=focal)
     valid = tri.valid & inl

@@ -18,10 +18,10 @@ from numpy.typing import NDArray
 from amrvio.estimator.local_mapping import Segment
 from amrvio.estimator.vo_map import VoMap
 from amrvio.frontend.tracker import Observations
-from amrvio.geometry._common import invert_T, project
 from amrvio.geometry.pnp import refine_pose_huber
+from amrvio.geometry.projection import project
 from amrvio.pipeline.records import PoseStatus
-from amrvio.types.lie import SE3, SO3
+from amrvio.types.lie import SE3, SO3, se3_matrix_inverse
 
 F64 = NDArray[np.float64]
 
@@ -93,7 +93,7 @@ class TrajectoryComposer:
         T_cw = a.T_cam_ref
         if a.kind is AnchorKind.KEYFRAME and sg is not None and a.keyframe is not None:
             T_cw = a.T_cam_ref @ sg.mapper.map.keyframes[a.keyframe].T_cam_world
-        return sg.pose_in_world(T_cw) if sg is not None else invert_T(T_cw)
+        return sg.pose_in_world(T_cw) if sg is not None else se3_matrix_inverse(T_cw)
 
     def _refine(self, m: VoMap, T_cw: F64, obs: Observations) -> F64:
         has = m.points_of(obs.ids)
@@ -124,7 +124,7 @@ class TrajectoryComposer:
                     T_cw = self._refine(m, T_cw, a.observations)
             else:
                 T_cw = a.T_cam_ref
-            T_wc[i] = sg.pose_in_world(T_cw) if sg is not None else invert_T(T_cw)
+            T_wc[i] = sg.pose_in_world(T_cw) if sg is not None else se3_matrix_inverse(T_cw)
         statuses = [a.status for a in self.anchors]
         # frames at rest before an initialisation take the pose of the frame they match
         for i, a in enumerate(self.anchors):

@@ -27,10 +27,10 @@ from amrvio.estimator.local_mapping import KeyframeReport, LocalMapping, sim3_of
 from amrvio.estimator.scale_sources import CameraHeightScale
 from amrvio.frontend.keyframe_policy import KeyframeReason
 from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, TrackOutcome
-from amrvio.geometry._common import invert_T
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
 from amrvio.pipeline.records import EstimatorReport, FrameRecord, PoseStatus
 from amrvio.types.camera import CameraModel
+from amrvio.types.lie import se3_matrix_inverse
 from amrvio.types.sensors import ImuData
 
 F64 = NDArray[np.float64]
@@ -141,7 +141,7 @@ class Pipeline:
               step: _Step, events: list[str]) -> FrameRecord:
         self.composer.add(step.anchor)
         segs = self.mapping.segments
-        T_wc = segs[-1].pose_in_world(step.T_cam_world) if segs else invert_T(step.T_cam_world)
+        T_wc = segs[-1].pose_in_world(step.T_cam_world) if segs else se3_matrix_inverse(step.T_cam_world)
         tracking = dataclasses.replace(step.tracking, n_tracks=len(self.tracker.tracks))
         rec = FrameRecord(index, t_ns, step.anchor.status, to_se3(T_wc), None,
                           step.anchor.segment, 1.0, tuple(events), blur, health, tracking,
@@ -160,7 +160,7 @@ class Pipeline:
         """A tracked pose, kept relative to keyframe ``kf_id`` so that BA moves it along."""
         T_kf = self.mapping.current.mapper.map.keyframes[kf_id].T_cam_world
         return PoseAnchor(PoseStatus.TRACKED, AnchorKind.KEYFRAME, self._segment_id(), kf_id,
-                          T_cw @ invert_T(T_kf), obs, None)
+                          T_cw @ se3_matrix_inverse(T_kf), obs, None)
 
     # ------------------------------------------------------------------ before a map
     def _start(self, index: int, img: U8, events: list[str], keep_tracks: bool,
@@ -204,7 +204,7 @@ class Pipeline:
             T_cw_ref = a.T_cam_ref
             if a.kind is AnchorKind.KEYFRAME and a.keyframe is not None:
                 T_cw_ref = a.T_cam_ref @ sg.mapper.map.keyframes[a.keyframe].T_cam_world
-            T_wc_ref = invert_T(T_cw_ref)
+            T_wc_ref = se3_matrix_inverse(T_cw_ref)
             sim = sg.world_from_segment
             R_g = sim.R @ T_wc_ref[:3, :3]
             t_g = sim.s * sim.R @ T_wc_ref[:3, 3] + sim.t
@@ -236,7 +236,7 @@ class Pipeline:
             self.mapping.keep_image(new.kf0, self.initializer.ref_img)
         self.mapping.seal_keyframe(new.kf1, img, tracks)
         events.append(f"init_ok:ref={ref}")
-        kf = KeyframeReport(new.kf1, None, 0, res.n_points, None)
+        kf = KeyframeReport(new.kf1, None, 0, None, None)
         report = dataclasses.replace(report, n_inliers=res.n_points)
         return _Step(self._on_keyframe(new.T_cam_world, new.kf1, None), new.T_cam_world, report,
                      res, kf, reading)

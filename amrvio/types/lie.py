@@ -135,6 +135,54 @@ def so3_left_jacobian(omega: ArrayLike) -> F64:
     return np.eye(3) + float(b) * W + float(c) * (W @ W)
 
 
+def se3_matrix(R: ArrayLike, t: ArrayLike) -> F64:
+    """4x4 homogeneous matrix of a rotation (3, 3) and a translation (3,) (no orthonormalisation)."""
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = np.asarray(t, dtype=np.float64).reshape(3)
+    return T
+
+
+def se3_matrix_inverse(T: F64) -> F64:
+    """Inverse of a 4x4 rigid transform: [R^T, -R^T t]."""
+    Ti = np.eye(4)
+    Ti[:3, :3] = T[:3, :3].T
+    Ti[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return Ti
+
+
+def transform_points(T: F64, points: F64) -> F64:
+    """``R p + t`` for (N, 3) points: one 4x4 transform for all, or (N, 4, 4), one per point."""
+    if T.ndim == 3:
+        return np.asarray(np.einsum("nij,nj->ni", T[:, :3, :3], points) + T[:, :3, 3],
+                          dtype=np.float64)
+    return np.asarray(points @ T[:3, :3].T + T[:3, 3], dtype=np.float64)
+
+
+def interpolate_se3(T0: ArrayLike, T1: ArrayLike, alpha: ArrayLike) -> F64:
+    """Pose interpolation on 4x4 matrices, batched: (N, 4, 4), (N, 4, 4), (N,) -> (N, 4, 4), or
+    one (4, 4) pair with a scalar ``alpha``. alpha = 0 gives T0, 1 gives T1.
+
+    Rotation along the geodesic, R0 exp(alpha log(R0^T R1)) (slerp); translation linearly,
+    (1 - alpha) t0 + alpha t1 (the trajectory interpolation convention, as in evo)."""
+    A = np.asarray(T0, dtype=np.float64)
+    B = np.asarray(T1, dtype=np.float64)
+    a = np.asarray(alpha, dtype=np.float64)
+    single = A.shape == (4, 4)
+    A3, B3, a1 = A.reshape(-1, 4, 4), B.reshape(-1, 4, 4), a.reshape(-1)
+    if A3.shape != B3.shape or A.shape[-2:] != (4, 4) or a1.shape != (A3.shape[0],):
+        raise ShapeError(
+            f"interpolate_se3 needs (N,4,4), (N,4,4), (N,) or (4,4), (4,4), (); got "
+            f"{A.shape}, {B.shape}, {a.shape}"
+        )
+    R0 = A3[:, :3, :3]
+    delta = so3_log(np.transpose(R0, (0, 2, 1)) @ B3[:, :3, :3]).reshape(-1, 3)
+    out = np.tile(np.eye(4), (A3.shape[0], 1, 1))
+    out[:, :3, :3] = R0 @ so3_exp(a1[:, None] * delta).reshape(-1, 3, 3)
+    out[:, :3, 3] = (1 - a1)[:, None] * A3[:, :3, 3] + a1[:, None] * B3[:, :3, 3]
+    return out[0] if single else out
+
+
 def quat_wxyz_to_matrix(quats: ArrayLike) -> F64:
     """Unit quaternions (N, 4) [w, x, y, z] -> rotation matrices (N, 3, 3); (4,) -> (3, 3)."""
     q = np.asarray(quats, dtype=np.float64)
@@ -317,8 +365,8 @@ class SE3:
         return _apply(self.rot.R, self.t, 1.0, points)
 
     def interpolate(self, other: SE3, alpha: float) -> SE3:
-        """Rotation by slerp, translation linearly (the convention of trajectory interpolation)."""
-        return SE3(self.rot.interpolate(other.rot, alpha), (1 - alpha) * self.t + alpha * other.t)
+        """Rotation by slerp, translation linearly (:func:`interpolate_se3`)."""
+        return SE3.from_matrix(interpolate_se3(self.matrix(), other.matrix(), alpha))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -409,6 +457,29 @@ class Sim3:
 
     def act(self, points: ArrayLike) -> F64:
         return _apply(self.rot.R, self.t, self.s, points)
+
+    @staticmethod
+    def from_srt(s: float, R: ArrayLike, t: ArrayLike) -> Sim3:
+        """From scale ``s``, rotation ``R`` (3, 3; checked, not re-orthonormalised) and ``t`` (3,)."""
+        return Sim3(SO3(np.asarray(R, dtype=np.float64)), np.asarray(t, dtype=np.float64), s)
+
+    def srt(self) -> tuple[float, F64, F64]:
+        """(s, R (3, 3), t (3,)) with ``p_a = s R p_b + t``."""
+        return self.s, np.array(self.rot.R), np.array(self.t)
+
+    def transform_pose(self, T_b_x: SE3) -> SE3:
+        """Change of world frame for a pose: ``T_a_x = S_a_b * T_b_x`` with the scale applied to
+        the position only, so the result stays rigid: R = R_S R_T, t = (s R_S) t_T + t_S.
+        (Maps a camera pose T_world_cam of a map segment into the global frame.)"""
+        R = self.rot.R @ T_b_x.rot.R
+        return SE3(SO3(R), self.s * self.rot.R @ T_b_x.t + self.t)
+
+    def transform_pose_matrix(self, T_b_x: F64) -> F64:
+        """:meth:`transform_pose` on a 4x4 pose matrix (no validation, no re-orthonormalisation)."""
+        out = np.array(T_b_x, dtype=np.float64, copy=True)
+        out[:3, 3] = self.s * self.rot.R @ out[:3, 3] + self.t
+        out[:3, :3] = self.rot.R @ out[:3, :3]
+        return out
 
     def to_se3(self) -> SE3:
         """The rigid part (R, t), dropping the scale."""

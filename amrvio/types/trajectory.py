@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from amrvio.errors import ShapeError
-from amrvio.types.lie import SE3, SO3, Sim3, matrix_to_quat_wxyz, quat_wxyz_to_matrix, so3_exp, so3_log
+from amrvio.types.lie import SE3, SO3, Sim3, interpolate_se3, matrix_to_quat_wxyz, quat_wxyz_to_matrix
 
 F64 = NDArray[np.float64]
 
@@ -129,7 +129,8 @@ class Trajectory:
 
     def interpolated_at(self, stamps_s: ArrayLike) -> Trajectory:
         """Poses at ``stamps_s`` (M,), each inside [first, last] stamp: positions linearly,
-        rotations by geodesic interpolation (slerp) between the bracketing poses."""
+        rotations by geodesic interpolation (slerp) between the bracketing poses
+        (:func:`amrvio.types.lie.interpolate_se3`)."""
         t = np.asarray(stamps_s, dtype=np.float64)
         if t.ndim != 1 or len(self) < 2:
             raise ShapeError(f"need (M,) stamps and a trajectory of >= 2 poses, got {t.shape} and {len(self)}")
@@ -141,9 +142,6 @@ class Trajectory:
         hi = np.clip(np.searchsorted(self.stamps_s, t, side="right"), 1, len(self) - 1)
         lo = hi - 1
         alpha = (t - self.stamps_s[lo]) / (self.stamps_s[hi] - self.stamps_s[lo])
-        p = (1 - alpha)[:, None] * self.positions_m[lo] + alpha[:, None] * self.positions_m[hi]
-        Rs = self.rotations()
-        R_lo = Rs[lo]
-        delta = so3_log(np.transpose(R_lo, (0, 2, 1)) @ Rs[hi]).reshape(-1, 3)
-        R = R_lo @ so3_exp(alpha[:, None] * delta).reshape(-1, 3, 3)
-        return Trajectory(t, p, matrix_to_quat_wxyz(R).reshape(-1, 4))
+        T = self.matrices()
+        out = interpolate_se3(T[lo], T[hi], alpha).reshape(-1, 4, 4)
+        return Trajectory(t, out[:, :3, 3], matrix_to_quat_wxyz(out[:, :3, :3]).reshape(-1, 4))
