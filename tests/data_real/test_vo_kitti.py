@@ -25,7 +25,7 @@ def test_vo_kitti_first_60_frames(shared_data: Path, tmp_path: Path) -> None:
     est = read_tum(out / "trajectory.tum")
     assert len(est) == N
     assert np.all(np.isfinite(est.positions_m))
-    with (out / "frames.csv").open() as fh:
+    with (out / "health.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     assert len(rows) == N
     assert all(r["status"] in ("tracked", "interpolated") for r in rows)
