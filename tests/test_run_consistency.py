@@ -69,6 +69,10 @@ def test_records_trajectory_and_summary_agree(runs: tuple[Path, Path, Path]) -> 
     assert ev == summary["events"]
     # the blackout is visible: some frames were not tracked on their own
     assert any(r["tracking"] not in ("tracked", "init_tracked", "started") for r in rows)
+    # the online (causal) trajectory: the same frames; it agrees with the refined one in the mean
+    online = np.loadtxt(out / "trajectory_online.tum", ndmin=2)
+    np.testing.assert_allclose(online[:, 0], traj[:, 0])
+    np.testing.assert_allclose([float(r["online_x"]) for r in rows], online[:, 1], atol=2e-6)
     # quaternions are unit
     np.testing.assert_allclose(np.linalg.norm(traj[:, 4:], axis=1), 1.0, atol=1e-6)
     # the configuration used is recorded
@@ -77,7 +81,7 @@ def test_records_trajectory_and_summary_agree(runs: tuple[Path, Path, Path]) -> 
 
 def test_same_input_same_outputs(runs: tuple[Path, Path, Path]) -> None:
     _, a, b = runs
-    for name in ("trajectory.tum", "keyframes.tum", "health.csv", "advice.txt", "map.ply", "scale_drift.csv"):
+    for name in ("trajectory.tum", "trajectory_online.tum", "keyframes.tum", "health.csv", "advice.txt", "map.ply", "scale_drift.csv"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
     sa = json.loads((a / "summary.json").read_text(encoding="utf-8"))
     sb = json.loads((b / "summary.json").read_text(encoding="utf-8"))

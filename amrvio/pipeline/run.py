@@ -116,7 +116,8 @@ def frame_row(r: FrameRecord) -> list[str]:
 
 def write_outputs(out: PipelineOutput, out_dir: Path, config: PipelineConfig | None = None,
                   notes: Sequence[str] = ()) -> dict[str, object]:
-    """Write DIR/trajectory.tum, keyframes.tum, map.ply, health.csv, advice.txt,
+    """Write DIR/trajectory.tum (refined poses), trajectory_online.tum (the pose each frame had
+    when it was processed), keyframes.tum, map.ply, health.csv, advice.txt,
     scale_drift.csv and summary.json (with the configuration used). Returns the summary."""
     from amrvio.io.trajectory import write_tum
 
@@ -125,6 +126,11 @@ def write_outputs(out: PipelineOutput, out_dir: Path, config: PipelineConfig | N
     traj = Trajectory.from_matrices(stamps_s, out.T_world_cam)
     write_tum(out_dir / "trajectory.tum", traj)
     write_tum(out_dir / "keyframes.tum", traj.select(out.keyframe_indices))
+    online = [(i, r.pose_online) for i, r in enumerate(out.records) if r.pose_online is not None]
+    if online:
+        idx = np.array([i for i, _ in online], dtype=np.int64)
+        write_tum(out_dir / "trajectory_online.tum", Trajectory.from_matrices(
+            stamps_s[idx], np.stack([p.matrix() for _, p in online])))
     _write_ply(out_dir / "map.ply", out.map_points)
     write_health(out_dir / "health.csv", out.records)
     write_advice(out_dir / "advice.txt", out.records, config or PipelineConfig(), notes)
