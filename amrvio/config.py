@@ -177,17 +177,11 @@ HELP: dict[str, str] = {
 }
 
 
-def _fields(cls: type) -> dict[str, tuple[Any, Any]]:
-    """name -> (resolved type, default) of a config dataclass, the nested seeds left out."""
+def _fields(cls: type) -> dict[str, Any]:
+    """name -> resolved type of a config dataclass's fields, the nested seeds left out."""
     hints = typing.get_type_hints(cls)
-    out: dict[str, tuple[Any, Any]] = {}
-    for f in dataclasses.fields(cls):
-        if f.name == _SEED and cls is not PipelineConfig:
-            continue
-        default = f.default if f.default is not dataclasses.MISSING else (
-            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
-        out[f.name] = (hints[f.name], default)
-    return out
+    return {f.name: hints[f.name] for f in dataclasses.fields(cls)
+            if f.name != _SEED or cls is PipelineConfig}
 
 
 def _is_config(tp: Any) -> bool:
@@ -240,7 +234,7 @@ def _build(base: Any, data: dict[str, Any], where: str, prefix: str = "") -> Any
         if not isinstance(k, str) or k not in known:
             hint = " (there is one seed, at the top level)" if k == _SEED else ""
             raise ConfigError(f"{where}: unknown key '{key}'{hint}")
-        tp = known[k][0]
+        tp = known[k]
         if _is_config(tp):
             if not isinstance(v, dict):
                 raise ConfigError(f"{where}: key '{key}' must be a mapping of its fields, got {v!r}")
@@ -322,7 +316,7 @@ def dump_config(cfg: PipelineConfig | None = None) -> str:
 def all_keys(cls: type = PipelineConfig, prefix: str = "") -> list[str]:
     """Every settable dotted key of the tree."""
     keys: list[str] = []
-    for name, (tp, _) in _fields(cls).items():
+    for name, tp in _fields(cls).items():
         keys.append(prefix + name)
         if _is_config(tp):
             keys += all_keys(tp, prefix + name + ".")

@@ -46,20 +46,23 @@ def var_laplacian(image: NDArray[np.generic], step: int = 1) -> float:
     return float(std[0, 0]) ** 2
 
 
-def blur_score(image: NDArray[np.generic]) -> float:
+def blur_score(image: NDArray[np.generic], var_lap: float | None = None) -> float:
     """Contrast-normalised focus measure of an (H, W) grey image:
     ``Var(Delta I) / max(Var(I), 1)``, both on every second row and column (the Laplacian at full
-    resolution). Invariant to an affine brightness change (both variances scale by a^2)."""
+    resolution). Invariant to an affine brightness change (both variances scale by a^2).
+    ``var_lap``: ``var_laplacian(image, step=2)`` when the caller has it already."""
     img = np.asarray(image)
-    return var_laplacian(img, step=2) / max(float(np.var(img[::2, ::2])), 1.0)
+    if var_lap is None:
+        var_lap = var_laplacian(img, step=2)
+    return var_lap / max(float(np.var(img[::2, ::2])), 1.0)
 
 
 @dataclass(frozen=True, slots=True)
 class BlurResult:
     """Blur verdict of one frame.
 
-    ``score``: var_laplacian; ``reference``: running median of recent sharp scores used to
-    normalise; ``ratio = score / reference``; ``is_blurred``: ratio below the threshold.
+    ``score``: the score given to ``update`` (:func:`blur_score`); ``reference``: running median
+    of recent sharp scores used to normalise; ``ratio = score / reference``; ``is_blurred``: ratio below the threshold.
     """
 
     score: float

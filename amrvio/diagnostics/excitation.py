@@ -78,8 +78,7 @@ class Excitation:
 
     @property
     def accel_std_m_s2(self) -> float:
-        return float(np.sqrt(max(self.accel_var_m2_s4, 0.0))) if np.isfinite(self.accel_var_m2_s4) \
-            else float("nan")
+        return float(np.sqrt(max(self.accel_var_m2_s4, 0.0)))
 
     @property
     def degenerate(self) -> bool:

@@ -266,7 +266,9 @@ class FrameDiagnostics:
         # saturation and noise, so the sharp reference restarts there.
         if expo is not None and expo.flag:
             self._blur.reset()
-        blur = self._blur.update(blur_score(img))
+        var_lap = var_laplacian(img, step=2)
+        score = blur_score(img, var_lap)
+        blur = self._blur.update(score)
         smear, advice = self._smear(t_ns, exposure_s)
         smear_flag = smear is not None and smear.max_px > cfg.smear_flag_px
         ex: Excitation | None = None
@@ -278,7 +280,8 @@ class FrameDiagnostics:
             t_ns=int(t_ns),
             frame=idx,
             blur=BlurHealth(
-                var_lap=var_laplacian(img, step=2),
+                var_lap=var_lap,
+                score=score,
                 ratio=blur.ratio,
                 flag=bool(blur.is_blurred or smear_flag),
                 smear_px_pred=None if smear is None else smear.max_px,

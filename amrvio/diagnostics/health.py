@@ -12,13 +12,15 @@ from amrvio.diagnostics.excitation import Excitation
 
 @dataclass(frozen=True, slots=True)
 class BlurHealth:
-    """``var_lap``: the seed's Var(Delta I) of the raw image; ``ratio``: the scene-normalised
+    """``var_lap``: the seed's Var(Delta I) of the raw image; ``score``: the contrast-normalised
+    :func:`~amrvio.diagnostics.blur.blur_score`; ``ratio``: the scene-normalised
     :func:`~amrvio.diagnostics.blur.blur_score` over recent sharp frames; ``flag``: ratio low or
     predicted smear above the flag level. ``smear_px_pred``/``smear_px_mean``: gyro-predicted
     smear (max / mean over the image); ``max_exposure_s``: the longest exposure keeping the
     predicted smear under the bound at the current rate (only when the bound is exceeded)."""
 
     var_lap: float
+    score: float
     ratio: float
     flag: bool
     smear_px_pred: float | None = None

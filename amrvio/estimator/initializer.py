@@ -42,8 +42,9 @@ class InitConfig:
 @dataclass(frozen=True, slots=True)
 class InitResult:
     """One initialisation attempt: the two-view status, the reference frame, the tracks shared
-    with it, parallax and flow, triangulated points, whether the camera looked static, and
-    whether the attempt window ended (a new reference is taken)."""
+    with it, parallax and flow, triangulated points, whether the camera looked static, whether
+    the reference is too old (``window_ended``: a retry keeps the history), and whether the
+    attempt ends here (``restart``: a new reference is taken)."""
 
     status: TwoViewStatus
     ref_index: int
@@ -52,6 +53,7 @@ class InitResult:
     median_flow_px: float
     n_points: int
     static: bool
+    window_ended: bool
     restart: bool
 
     @property
@@ -124,11 +126,7 @@ class Initializer:
         restart = not tv.ok and (too_old or len(tracks) < self.cfg.two_view.min_points)
         return InitResult(tv.status, self.ref_index, int(cur_mask.sum()), tv.median_parallax_deg,
                           tv.median_flow_px, int(tv.point_valid.sum()) if tv.ok else 0, static,
-                          restart)
-
-    def window_ended(self, index: int) -> bool:
-        """The reference is too old: a retry keeps the history."""
-        return index - self.ref_index >= self.cfg.max_frames
+                          too_old, restart)
 
     def build(self, index: int, tracks: TrackSet, mapper: Mapper) -> NewMap:
         """After a successful :meth:`attempt` at frame ``index``: the first two keyframes, their

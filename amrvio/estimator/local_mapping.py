@@ -19,7 +19,7 @@ from amrvio.estimator.mapper import BAReport, Mapper, MapperConfig, Triangulatio
 from amrvio.frontend.anchor import AnchorConfig, AnchorImage, retrack_from_anchors
 from amrvio.frontend.keyframe_policy import KeyframePolicyConfig, KeyframeReason, keyframe_decision
 from amrvio.frontend.tracks import TrackSet
-from amrvio.types.lie import SO3, Sim3, se3_matrix_inverse
+from amrvio.types.lie import Sim3, se3_matrix_inverse
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
@@ -66,11 +66,6 @@ class Segment:
         _, X = self.mapper.map.all_points()
         sim = self.world_from_segment
         return scale * (sim.s * X @ sim.R.T + sim.t)
-
-
-def sim3_of(R: F64, t: F64, s: float) -> Sim3:
-    """A Sim3 from its parts, keeping R bit-exact."""
-    return Sim3(SO3(R), t, s)
 
 
 class LocalMapping:
@@ -152,4 +147,4 @@ class LocalMapping:
         return out
 
 
-__all__ = ["KeyframeReport", "LocalMapping", "MappingConfig", "Segment", "sim3_of"]
+__all__ = ["KeyframeReport", "LocalMapping", "MappingConfig", "Segment"]

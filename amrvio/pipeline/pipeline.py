@@ -23,14 +23,14 @@ from amrvio.diagnostics.blur import BlurResult, BlurScorer, blur_score
 from amrvio.diagnostics.frame import FrameDiagnostics, FrameHealth
 from amrvio.estimator.camera_height import HeightEstimate
 from amrvio.estimator.initializer import Initializer, InitResult
-from amrvio.estimator.local_mapping import KeyframeReport, LocalMapping, sim3_of
+from amrvio.estimator.local_mapping import KeyframeReport, LocalMapping
 from amrvio.estimator.scale_sources import CameraHeightScale
 from amrvio.frontend.keyframe_policy import KeyframeReason
 from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, TrackOutcome
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
 from amrvio.pipeline.records import EstimatorReport, FrameRecord, PoseStatus
 from amrvio.types.camera import CameraModel
-from amrvio.types.lie import se3_matrix_inverse
+from amrvio.types.lie import Sim3, se3_matrix_inverse
 from amrvio.types.sensors import ImuData
 
 F64 = NDArray[np.float64]
@@ -115,12 +115,16 @@ class Pipeline:
             health = self.diagnostics.process(image, t_ns, imu, exposure_s, index)
             self._toc("diagnostics", t0)
         cam = self.camera
+        undistorted = False
         if cam is not None and self.cfg.track and any(abs(c) > 0 for c in cam.distortion):
             t0 = time.perf_counter()
             image = np.asarray(cam.undistort_image(image), dtype=np.uint8)
+            undistorted = True
             self._toc("undistort", t0)
         t0 = time.perf_counter()
-        blur = self.blur.update(blur_score(image))
+        # the diagnostics scored this very image already, unless it was undistorted since
+        score = health.blur.score if health is not None and not undistorted else blur_score(image)
+        blur = self.blur.update(score)
         blurred = bool(blur.is_blurred) and self.cfg.blur_gating
         self._toc("blur", t0)
         events: list[str] = []
@@ -183,7 +187,7 @@ class Pipeline:
             return self._make_map(index, img, res, report, events)
         if res.restart:
             events.append(f"init_failed:{res.status.value}")
-            step = self._start(index, img, events, self.initializer.window_ended(index), res)
+            step = self._start(index, img, events, res.window_ended, res)
             if res.static:  # the camera did not move: the old reference shares this pose
                 old = self.composer.anchors[res.ref_index]
                 self.composer.replace(res.ref_index, dataclasses.replace(old, same_pose_as=index))
@@ -199,18 +203,11 @@ class Pipeline:
             # link the new segment to the world through the reference frame's last known pose;
             # keep the previous segment's typical speed: |t| = 1 map unit spans (index - ref)
             # frames. A guess, logged as such; --camera-height corrects it.
-            a = self.composer.anchors[ref]
-            sg = self.mapping.current
-            T_cw_ref = a.T_cam_ref
-            if a.kind is AnchorKind.KEYFRAME and a.keyframe is not None:
-                T_cw_ref = a.T_cam_ref @ sg.mapper.map.keyframes[a.keyframe].T_cam_world
-            T_wc_ref = se3_matrix_inverse(T_cw_ref)
-            sim = sg.world_from_segment
-            R_g = sim.R @ T_wc_ref[:3, :3]
-            t_g = sim.s * sim.R @ T_wc_ref[:3, 3] + sim.t
+            T_world_ref = self.composer.pose_in_world(ref, self.mapping.segments)
+            R_g, t_g = T_world_ref[:3, :3], T_world_ref[:3, 3]
             s_g = max(self.tracker.motion.typical_speed() * (index - ref), 1e-6)
             events.append(f"segment_scale_guess:{s_g:.4g}")
-        seg = self.mapping.new_segment(sim3_of(R_g, t_g, s_g))
+        seg = self.mapping.new_segment(Sim3.from_srt(s_g, R_g, t_g))
         seg_id = len(self.mapping.segments) - 1
         tracks = self.tracker.tracks
         new = self.initializer.build(index, tracks, seg.mapper)
