@@ -1,0 +1,147 @@
+"""Generalisation protocol of the monocular VO, default configuration only: KITTI 00 from several
+start frames and with frames dropped, EuRoC MH_01 carried by hand (also every 2nd frame), the
+hand-held phone (no ground truth), and the simulator's motion classes.
+
+Per run: frames, the frame of the first initialisation (from the run's start), frames TRACKED
+(final status, not interpolated), and the Sim3 ATE as a share of the path. The targets are those
+of issue 9; a row states whether it meets them.
+
+Run alone: ``.venv/bin/python -m bench.bench_protocol [--quick]``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from amrvio.config import PipelineConfig
+from amrvio.errors import EvaluationError
+from amrvio.eval.evaluate import evaluate
+from amrvio.io.base import Dataset
+from amrvio.io.dataset import open_dataset
+from amrvio.io.trajectory import read_tum
+from amrvio.pipeline.pipeline import PipelineOutput
+from amrvio.pipeline.records import PoseStatus
+from amrvio.pipeline.run import run_pipeline
+from amrvio.pipeline.threads import limit_native_threads
+from amrvio.types.trajectory import Trajectory
+
+DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
+KITTI = DATA / "kitti00_0000-0199"
+MH01 = DATA / "euroc_MH_01_handheld_0000-0299"
+PHONE = DATA / "phone_handheld_blur_0450-0549"
+Row = dict[str, object]
+
+
+def _subset(ds: Dataset, start: int, n: int | None, step: int) -> Dataset:
+    stop = None if n is None else start + n
+    return dataclasses.replace(ds, frames=tuple(ds.frames[start:stop:step]))
+
+
+def _init_frame(out: PipelineOutput) -> int | None:
+    for i, r in enumerate(out.records):
+        if any(e.startswith("init_ok") for e in r.events):
+            return i
+    return None
+
+
+def _row(name: str, out: PipelineOutput, gt: Trajectory | None, targets: str) -> Row:
+    n = len(out.records)
+    tracked = sum(r.status is PoseStatus.TRACKED for r in out.records)
+    init = _init_frame(out)
+    ate_pct = float("nan")
+    note = ""
+    if gt is not None:
+        est = Trajectory.from_matrices(out.stamps_ns * 1e-9, out.T_world_cam)
+        try:
+            res = evaluate(est, gt, align="sim3")
+        except EvaluationError as err:  # e.g. a straight path: Sim3 is undefined
+            note = f"no Sim3 ATE: {err}"
+        else:
+            ate_pct = 100.0 * res.ate.rmse / res.path_length_m
+            note = f"ATE {res.ate.rmse:.3f} m over {res.path_length_m:.1f} m"
+    return {"name": f"protocol {name}", "value": ate_pct, "unit": "% Sim3 ATE / path",
+            "note": f"{n} frames, init at {init}, {tracked}/{n} tracked "
+                    f"({100.0 * tracked / n:.1f} %); {note}; targets: {targets}"}
+
+
+def _kitti(quick: bool) -> list[Row]:
+    if not KITTI.is_dir():
+        return []
+    ds = open_dataset(f"kitti:{KITTI}")
+    gt = ds.groundtruth
+    rows: list[Row] = []
+    cases: list[tuple[str, int, int | None, int]] = [
+        (f"kitti00 start {s} x100", s, 100, 1) for s in (0, 20, 40, 60, 80, 100)]
+    cases += [(f"kitti00 start {s} x80 (in the turn)", s, 80, 1) for s in (110, 120)]
+    cases += [("kitti00 every 2nd frame", 0, None, 2), ("kitti00 every 3rd frame", 0, None, 3),
+              ("kitti00 0-199", 0, None, 1)]
+    if quick:
+        cases = cases[:1] + cases[-3:]
+    for name, start, n, step in cases:
+        out = run_pipeline(_subset(ds, start, n, step), PipelineConfig())
+        rows.append(_row(name, out, gt, "init <= 10 frames, >= 97 % tracked, <= 1 % (0-199: "
+                                        "<= 0.65 %)"))
+    return rows
+
+
+def _mh01() -> list[Row]:
+    if not MH01.is_dir():
+        return []
+    ds = open_dataset(str(MH01))
+    gt = read_tum(MH01 / "gt" / "groundtruth_cam0_tum.txt")
+    return [_row(f"euroc MH_01 hand-held{' every 2nd frame' if step == 2 else ''}",
+                 run_pipeline(_subset(ds, 0, None, step), PipelineConfig()), gt,
+                 "init <= 10 frames, >= 97 % tracked, <= 1 %") for step in (1, 2)]
+
+
+def _phone() -> list[Row]:
+    if not PHONE.is_dir():
+        return []
+    ds = open_dataset(str(PHONE), PHONE / "calib_claimed" / "live.yaml")
+    return [_row("phone hand-held (no ground truth)", run_pipeline(ds, PipelineConfig()), None,
+                 ">= 90 % tracked in one segment")]
+
+
+def _sim(quick: bool) -> list[Row]:
+    from amrvio.sim.simulate import SimConfig, simulate
+
+    motions = [("corridor", "forward-stop-turn"), ("corridor", "constant-velocity"),
+               ("warehouse", "rough-floor"), ("room", "handheld")]
+    if quick:
+        motions = motions[:1]
+    rows: list[Row] = []
+    with tempfile.TemporaryDirectory() as td:
+        for scene, motion in motions:
+            seq = Path(td) / f"{scene}_{motion}"
+            simulate(SimConfig(scene=scene, motion=motion, seconds=8.0, fps=20.0, width=752,
+                               height=480, blur=False), seq)
+            ds = open_dataset(str(seq))
+            if ds.groundtruth is None or ds.T_body_cam is None:
+                raise RuntimeError("the simulator wrote no ground truth")
+            gt = ds.groundtruth.right_multiplied(ds.T_body_cam)
+            rows.append(_row(f"sim {scene} {motion} 752x480 8 s", run_pipeline(ds, PipelineConfig()),
+                             gt, ">= 98 % tracked, <= 1 %"))
+    return rows
+
+
+def _rows(quick: bool) -> Iterator[Row]:
+    limit_native_threads(1)  # as `amrvio run` does
+    for part in (lambda: _sim(quick), lambda: _mh01(), lambda: _phone(), lambda: _kitti(quick)):
+        yield from part()
+
+
+def run(quick: bool) -> list[Row]:
+    return list(_rows(quick))
+
+
+if __name__ == "__main__":
+    for r in _rows("--quick" in sys.argv):
+        v = r["value"]
+        print(f"{r['name']:<48} {float(v) if isinstance(v, float) else np.nan:>8.3f} % {r['note']}",
+              flush=True)
