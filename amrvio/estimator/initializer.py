@@ -1,9 +1,13 @@
 """Initializer stage: builds the first map of a segment from two views.
 
 It keeps a reference image and the tracks seen since; each frame it scores the two-view
-geometry between the reference and the current tracks (``geometry.two_view``). On success it
-creates the two keyframes and their points in the mapper it is given, bundle-adjusts them, and
-poses the frames in between by PnP. Every attempt returns an :class:`InitResult`.
+geometry between the reference and the current tracks (``geometry.two_view``: homography or
+essential matrix, chosen by score, accepted on the quality of the triangulated points). There
+is no fixed window: the reference is kept while enough of its tracks survive and moved when they
+do not. While the camera only rotates, each attempt still gives the rotation to the reference,
+so the caller can keep the frame posed. On success it creates the two keyframes and their points
+in the mapper it is given, bundle-adjusts them, and poses the frames in between by PnP. Every
+attempt returns an :class:`InitResult`.
 """
 
 from __future__ import annotations
@@ -18,7 +22,13 @@ from amrvio.estimator.mapper import Mapper
 from amrvio.frontend.tracker import Observations
 from amrvio.frontend.tracks import TrackSet
 from amrvio.geometry.pnp import solve_pnp
-from amrvio.geometry.two_view import TwoViewConfig, TwoViewResult, TwoViewStatus, two_view_init
+from amrvio.geometry.two_view import (
+    TwoViewConfig,
+    TwoViewModel,
+    TwoViewResult,
+    TwoViewStatus,
+    two_view_init,
+)
 from amrvio.types.lie import SE3
 
 F64 = NDArray[np.float64]
@@ -28,12 +38,15 @@ U8 = NDArray[np.uint8]
 
 @dataclass(frozen=True, slots=True)
 class InitConfig:
-    """Two-view gates; ``max_frames``: frames after which the reference is replaced;
-    ``static_flow_px``: median flow under which a low-parallax pair counts as a camera at rest;
-    PnP gates for posing the frames between the two views."""
+    """Two-view gates; ``min_shared_ratio``: the reference is replaced when fewer than this share
+    of its tracks (and fewer than twice ``two_view.min_points``) survive; ``max_history``: frames
+    since the reference kept for posing by PnP after the map exists; ``static_flow_px``: median
+    flow under which a low-parallax pair counts as a camera at rest; PnP gates for posing the
+    frames between the two views."""
 
-    two_view: TwoViewConfig = field(default_factory=lambda: TwoViewConfig(min_parallax_deg=3.0))
-    max_frames: int = 20
+    two_view: TwoViewConfig = field(default_factory=TwoViewConfig)
+    min_shared_ratio: float = 0.3
+    max_history: int = 300
     static_flow_px: float = 0.5
     min_pnp_inliers: int = 25
     pnp_thresh_px: float = 1.0
@@ -41,20 +54,23 @@ class InitConfig:
 
 @dataclass(frozen=True, slots=True)
 class InitResult:
-    """One initialisation attempt: the two-view status, the reference frame, the tracks shared
-    with it, parallax and flow, triangulated points, whether the camera looked static, whether
-    the reference is too old (``window_ended``: a retry keeps the history), and whether the
-    attempt ends here (``restart``: a new reference is taken)."""
+    """One initialisation attempt: the two-view status and model, the reference frame, the tracks
+    shared with it, parallax (median and the gated order statistic) and flow, triangulated points,
+    whether the camera looked static, whether the attempt ends here (``restart``: a new reference
+    is taken), and ``T_cur_ref`` (4x4): the rotation to the reference (zero translation) when the
+    camera was found rotating or at rest, else None."""
 
     status: TwoViewStatus
+    model: TwoViewModel
     ref_index: int
     n_shared_tracks: int
     median_parallax_deg: float
+    parallax_deg: float
     median_flow_px: float
     n_points: int
     static: bool
-    window_ended: bool
     restart: bool
+    T_cur_ref: F64 | None = None
 
     @property
     def ok(self) -> bool:
@@ -101,7 +117,7 @@ class Initializer:
     def begin(self, index: int, img: U8, tracks: TrackSet, keep_history: bool) -> None:
         """Frame ``index`` becomes the reference. ``keep_history`` (a retry in the same place)
         keeps the frames of the failed attempt, so that they still get a pose by PnP."""
-        history = self.history[-self.cfg.max_frames * 3:] if keep_history else []
+        history = self.history[-self.cfg.max_history:] if keep_history else []
         self.ref_index = index
         self.ref_img = img
         self.ref_ids = tracks.ids.copy()
@@ -120,13 +136,19 @@ class Initializer:
         tv = two_view_init(self.ref_pts[ref_mask], tracks.pts[cur_mask], self.K, self.cfg.two_view)
         self.timings["init"] = self.timings.get("init", 0.0) + time.perf_counter() - t0
         self._last = tv
+        if len(self.history) > self.cfg.max_history:
+            self.history = [self.history[0], *self.history[-self.cfg.max_history:]]
         static = (tv.status is TwoViewStatus.LOW_PARALLAX
                   and tv.median_flow_px < self.cfg.static_flow_px)
-        too_old = index - self.ref_index >= self.cfg.max_frames
-        restart = not tv.ok and (too_old or len(tracks) < self.cfg.two_view.min_points)
-        return InitResult(tv.status, self.ref_index, int(cur_mask.sum()), tv.median_parallax_deg,
-                          tv.median_flow_px, int(tv.point_valid.sum()) if tv.ok else 0, static,
-                          too_old, restart)
+        n_shared = int(cur_mask.sum())
+        few = n_shared < max(2 * self.cfg.two_view.min_points,
+                             self.cfg.min_shared_ratio * len(self.ref_ids))
+        restart = not tv.ok and few
+        rotating = tv.model is TwoViewModel.ROTATION
+        return InitResult(tv.status, tv.model, self.ref_index, n_shared, tv.median_parallax_deg,
+                          tv.parallax_deg, tv.median_flow_px,
+                          int(tv.point_valid.sum()) if tv.ok else 0, static, restart,
+                          tv.T_c2_c1.copy() if rotating else None)
 
     def build(self, index: int, tracks: TrackSet, mapper: Mapper) -> NewMap:
         """After a successful :meth:`attempt` at frame ``index``: the first two keyframes, their

@@ -23,7 +23,8 @@ from amrvio.frontend.direct import DirectConfig, align_direct
 from amrvio.frontend.klt import KltConfig, KltResult, KltTracker, detect_bucketed, predict_tracks
 from amrvio.frontend.tracks import UNANCHORED, TrackSet
 from amrvio.geometry.pnp import solve_pnp
-from amrvio.geometry.projection import project
+from amrvio.geometry.projection import normalized_to_bearings, pixels_to_normalized, project
+from amrvio.geometry.two_view import robust_rotation
 from amrvio.types.lie import se3_matrix_inverse
 
 F64 = NDArray[np.float64]
@@ -43,7 +44,9 @@ class Landmarks(Protocol):
 
 @dataclass(frozen=True, slots=True)
 class TrackingConfig:
-    """KLT front-end, PnP gates (pixels) and the direct-alignment prior/fallback switches."""
+    """KLT front-end, PnP gates (pixels), the direct-alignment prior/fallback switches, and the
+    rotation-only update: when PnP fails, a frame whose tracks one rotation explains (median
+    residual under ``rotation_max_px``) is posed by that rotation about the last position."""
 
     klt: KltConfig = field(default_factory=KltConfig)
     direct: DirectConfig = field(default_factory=DirectConfig)
@@ -52,6 +55,8 @@ class TrackingConfig:
     min_pnp_inliers: int = 25
     pnp_thresh_px: float = 1.0
     huber_px: float = 2.0
+    rotation_only: bool = True
+    rotation_max_px: float = 1.0
 
 
 class TrackOutcome(Enum):
@@ -64,6 +69,7 @@ class TrackOutcome(Enum):
     TRACKED_BLURRED = "tracked_blurred"  # PnP pose on a blurred frame; tracks not committed
     PREDICTED = "predicted"  # blurred and PnP failed: the motion-model pose
     DIRECT = "direct_fallback"  # pose from direct alignment; tracks re-seeded from the map
+    ROTATION = "rotation_only"  # too few map points, but one rotation explains the flow
     LOST = "lost"  # no pose: tracking must restart
 
 
@@ -228,6 +234,9 @@ class Tracker:
             d = self._direct(img, V, m) if cfg.direct_fallback else None
             if d is not None:
                 return self._direct_fallback(img, d, m, res, prior)
+            R = self._rotation(res) if cfg.rotation_only else None
+            if R is not None:
+                return self._rotation_step(img, R, res, prior, pnp.status.value)
             mot.T_last = T_pred
             return TrackStep(self._report(TrackOutcome.LOST, res, 0, prior, pnp.status.value),
                              T_pred, None)
@@ -253,6 +262,37 @@ class Tracker:
         self.gap = 0
         return TrackStep(self._report(TrackOutcome.TRACKED, res, n_inl, prior, pnp.status.value),
                          T_cw, obs)
+
+    def _rotation(self, res: KltResult) -> F64 | None:
+        """R_cur_prev when one rotation explains the tracked flow, else None."""
+        ok = res.ok
+        if int(ok.sum()) < self.cfg.min_pnp_inliers:
+            return None
+        b0 = normalized_to_bearings(pixels_to_normalized(self.tracks.pts[ok], self.K))
+        b1 = normalized_to_bearings(pixels_to_normalized(res.pts[ok], self.K))
+        R, resid_deg = robust_rotation(b0, b1)
+        focal = 0.5 * (self.K[0, 0] + self.K[1, 1])
+        if float(np.median(np.radians(resid_deg))) * focal > self.cfg.rotation_max_px:
+            return None
+        return R
+
+    def _rotation_step(self, img: U8, R: F64, res: KltResult, prior: bool,
+                       pnp: str) -> TrackStep:
+        """Pose by rotation about the last camera centre; tracks committed."""
+        T_last = self.motion.T_last
+        if T_last is None:
+            raise RuntimeError("Tracker: rotation update without a previous pose")
+        dT = np.eye(4)
+        dT[:3, :3] = R
+        T_cw = dT @ T_last
+        tr = self.tracks
+        tr.move(res.pts)
+        tr.keep(res.ok)
+        self.prev_img = img
+        self.motion.velocity = dT
+        self.motion.T_last = T_cw
+        self.gap = 0
+        return TrackStep(self._report(TrackOutcome.ROTATION, res, 0, prior, pnp), T_cw, None)
 
     def _direct(self, img: U8, V: F64, m: Landmarks) -> F64 | None:
         """T_cur_prev from sparse direct alignment (SE(3) + affine brightness) of ``img`` to the

@@ -31,13 +31,15 @@ class AnchorKind(Enum):
 
     KEYFRAME = "keyframe"  # keyframe ``keyframe`` of ``segment``
     ABSOLUTE = "absolute"  # the world of ``segment`` (the global world when segment is None)
+    FRAME = "frame"  # frame ``ref_frame``, whatever its pose turns out to be
     INTERPOLATE = "interpolate"  # no pose of its own: interpolated between tracked neighbours
 
 
 @dataclass(frozen=True, slots=True)
 class PoseAnchor:
-    """How a frame's pose is composed at the end. ``same_pose_as``: the frame had not moved
-    from that frame (before initialisation) and takes its pose when that one is tracked."""
+    """How a frame's pose is composed at the end. ``ref_frame`` (kind FRAME): the frame's pose
+    is ``T_cam_ref`` relative to that frame's (before initialisation: a camera at rest, identity,
+    or one that only rotated, a rotation); it is tracked when that one is."""
 
     status: PoseStatus
     kind: AnchorKind
@@ -45,7 +47,7 @@ class PoseAnchor:
     keyframe: int | None
     T_cam_ref: F64
     observations: Observations | None = None
-    same_pose_as: int | None = None
+    ref_frame: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +93,8 @@ class TrajectoryComposer:
         a = self.anchors[index]
         sg = segments[a.segment] if a.segment is not None else None
         T_cw = a.T_cam_ref
+        if a.kind is AnchorKind.FRAME and a.ref_frame is not None:
+            return self.pose_in_world(a.ref_frame, segments) @ se3_matrix_inverse(a.T_cam_ref)
         if a.kind is AnchorKind.KEYFRAME and sg is not None and a.keyframe is not None:
             T_cw = a.T_cam_ref @ sg.mapper.map.keyframes[a.keyframe].T_cam_world
         return sg.pose_in_world(T_cw) if sg is not None else se3_matrix_inverse(T_cw)
@@ -114,7 +118,7 @@ class TrajectoryComposer:
         n = len(self.anchors)
         T_wc = np.zeros((n, 4, 4))
         for i, a in enumerate(self.anchors):
-            if a.kind is AnchorKind.INTERPOLATE:
+            if a.kind in (AnchorKind.INTERPOLATE, AnchorKind.FRAME):
                 continue
             sg = segments[a.segment] if a.segment is not None else None
             if a.kind is AnchorKind.KEYFRAME and sg is not None and a.keyframe is not None:
@@ -125,15 +129,7 @@ class TrajectoryComposer:
             else:
                 T_cw = a.T_cam_ref
             T_wc[i] = sg.pose_in_world(T_cw) if sg is not None else se3_matrix_inverse(T_cw)
-        statuses = [a.status for a in self.anchors]
-        # frames at rest before an initialisation take the pose of the frame they match
-        for i, a in enumerate(self.anchors):
-            j, hops = a.same_pose_as, 0
-            while j is not None and self.anchors[j].same_pose_as is not None and hops < n:
-                j, hops = self.anchors[j].same_pose_as, hops + 1
-            if a.same_pose_as is not None and j is not None and statuses[j] is PoseStatus.TRACKED:
-                T_wc[i] = T_wc[j]
-                statuses[i] = PoseStatus.TRACKED
+        statuses = self._resolve_frames(T_wc)
         tracked = np.flatnonzero([s is PoseStatus.TRACKED for s in statuses])
         if len(tracked):
             T_wc = _fill_interpolated(T_wc, statuses, tracked)
@@ -146,6 +142,34 @@ class TrajectoryComposer:
                 q[i] = q[i - 1] + 0.5 * (frame_scale[i] + frame_scale[i - 1]) * (p[i] - p[i - 1])
             T_wc[:, :3, 3] = q
         return ComposedTrajectory(T_wc, tuple(statuses))
+
+
+    def _resolve_frames(self, T_wc: F64) -> list[PoseStatus]:
+        """Frames anchored to another frame (at rest or rotating before an initialisation) take
+        its final pose composed with theirs, and are tracked when it is; ``T_wc`` is filled in."""
+        statuses = [a.status for a in self.anchors]
+        n = len(self.anchors)
+        done = [a.kind is not AnchorKind.FRAME for a in self.anchors]
+        for i in range(n):
+            chain = [i]
+            while not done[chain[-1]] and len(chain) <= n:
+                nxt = self.anchors[chain[-1]].ref_frame
+                if nxt is None:
+                    break
+                chain.append(nxt)
+            root = chain[-1]
+            for k in reversed(chain[:-1]):
+                a = self.anchors[k]
+                if done[root] and statuses[root] is PoseStatus.TRACKED:
+                    T_wc[k] = T_wc[root] @ se3_matrix_inverse(a.T_cam_ref)
+                    statuses[k] = PoseStatus.TRACKED
+                else:
+                    statuses[k] = a.status if a.status is not PoseStatus.TRACKED else \
+                        PoseStatus.LOST
+                    T_wc[k] = np.eye(4)
+                done[k] = True
+                root = k
+        return statuses
 
 
 def _fill_interpolated(T_wc: F64, statuses: list[PoseStatus], tracked: NDArray[np.intp]) -> F64:

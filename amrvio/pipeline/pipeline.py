@@ -156,9 +156,8 @@ class Pipeline:
     def _segment_id(self) -> int | None:
         return len(self.mapping.segments) - 1 if self.mapping.segments else None
 
-    def _absolute(self, status: PoseStatus, T_cw: F64, same_as: int | None = None) -> PoseAnchor:
-        return PoseAnchor(status, AnchorKind.ABSOLUTE, self._segment_id(), None, T_cw.copy(),
-                          None, same_as)
+    def _absolute(self, status: PoseStatus, T_cw: F64) -> PoseAnchor:
+        return PoseAnchor(status, AnchorKind.ABSOLUTE, self._segment_id(), None, T_cw.copy())
 
     def _on_keyframe(self, T_cw: F64, kf_id: int, obs: Observations | None) -> PoseAnchor:
         """A tracked pose, kept relative to keyframe ``kf_id`` so that BA moves it along."""
@@ -179,21 +178,30 @@ class Pipeline:
 
     def _init_step(self, index: int, img: U8, blurred: bool, events: list[str]) -> _Step:
         report = self.tracker.track_to_reference(img, blurred)
-        T_hold = self.composer.anchors[-1].T_cam_ref
+        ref = self.composer.anchors[self.initializer.ref_index]
+        T_hold = ref.T_cam_ref if ref.kind is AnchorKind.ABSOLUTE else np.eye(4)
         if blurred:
             return _Step(self._absolute(PoseStatus.LOST, T_hold), T_hold, report)
         res = self.initializer.attempt(index, self.tracker.tracks)
         if res.ok:
             return self._make_map(index, img, res, report, events)
+        if res.T_cur_ref is not None and not res.static:
+            events.append("rotation_only")
         if res.restart:
             events.append(f"init_failed:{res.status.value}")
-            step = self._start(index, img, events, res.window_ended, res)
-            if res.static:  # the camera did not move: the old reference shares this pose
+            step = self._start(index, img, events, True, res)
+            if res.T_cur_ref is not None:
+                # the camera rotated (or rested) since the old reference: it hangs on this frame
                 old = self.composer.anchors[res.ref_index]
-                self.composer.replace(res.ref_index, dataclasses.replace(old, same_pose_as=index))
+                self.composer.replace(res.ref_index, dataclasses.replace(
+                    old, status=PoseStatus.TRACKED, kind=AnchorKind.FRAME,
+                    T_cam_ref=se3_matrix_inverse(res.T_cur_ref), ref_frame=index))
             return step
-        same = res.ref_index if res.static else None
-        return _Step(self._absolute(PoseStatus.LOST, T_hold, same), T_hold, report, res)
+        if res.T_cur_ref is not None:
+            anchor = PoseAnchor(PoseStatus.TRACKED, AnchorKind.FRAME, None, None,
+                                res.T_cur_ref.copy(), None, res.ref_index)
+            return _Step(anchor, T_hold, report, res)
+        return _Step(self._absolute(PoseStatus.LOST, T_hold), T_hold, report, res)
 
     def _make_map(self, index: int, img: U8, res: InitResult, report: TrackingReport,
                   events: list[str]) -> _Step:
@@ -217,10 +225,12 @@ class Pipeline:
             if fp.T_cam_kf0 is not None:
                 anchor = PoseAnchor(PoseStatus.TRACKED, AnchorKind.KEYFRAME, seg_id, new.kf0,
                                     fp.T_cam_kf0, fp.observations, None)
+            elif old.kind is AnchorKind.FRAME:
+                continue  # a rotation (or rest) relative to a frame that gets a pose
             else:
                 anchor = dataclasses.replace(old, status=PoseStatus.INTERPOLATED,
                                              kind=AnchorKind.INTERPOLATE, segment=seg_id,
-                                             keyframe=None, same_pose_as=None)
+                                             keyframe=None, ref_frame=None)
             self.composer.replace(fp.index, anchor)
         old_ref = self.composer.anchors[ref]
         self.composer.replace(ref, dataclasses.replace(
@@ -261,6 +271,8 @@ class Pipeline:
         if rep.outcome is TrackOutcome.TRACKED_BLURRED:
             return _Step(self._on_keyframe(step.T_cam_world, last_kf, step.observations),
                          step.T_cam_world, rep)
+        if rep.outcome is TrackOutcome.ROTATION:
+            events.append("rotation_only")
         reason = self.mapping.keyframe_due(index, rep.n_inliers, tracks)
         if reason is KeyframeReason.NONE:
             return _Step(self._on_keyframe(step.T_cam_world, last_kf, step.observations),
