@@ -28,12 +28,14 @@ from amrvio.sim.kinematics import (
     layout_xy,
     with_bursts,
 )
+from amrvio.sim.motions_robot import ROBOT_MOTION_KINDS, UnicycleMotion, make_robot_motion
 from amrvio.types.lie import SE3, SO3
 
-MOTION_KINDS: tuple[str, ...] = ("forward-stop-turn", "constant-velocity", "rough-floor", "handheld")
+MOTION_KINDS: tuple[str, ...] = ("forward-stop-turn", "constant-velocity", "rough-floor", "handheld",
+                                 "wall-scan", *ROBOT_MOTION_KINDS)
 
 __all__ = ["MOTION_KINDS", "BlurBurst", "Motion", "MotionLayout", "default_T_body_cam", "make_motion",
-           "parse_blur_bursts"]
+           "parse_blur_bursts", "UnicycleMotion"]
 
 
 def parse_blur_bursts(spec: str) -> tuple[BlurBurst, ...]:
@@ -101,24 +103,59 @@ def _forward_stop_turn(layout: MotionLayout, duration: float) -> tuple[Signal, S
     return MinJerkPath(kt_t, tuple(kx)), MinJerkPath(kt_t, tuple(ky)), MinJerkPath(kt_t, tuple(kyaw))
 
 
+def _wall_scan(lay: MotionLayout, rng: np.random.Generator) -> tuple[Signal, ...]:
+    """x, y, z, yaw, pitch, roll of a hand-held camera scanning what lies ahead of the layout.
+
+    Towards / away from it: a 14 s sine of up to 0.8 m amplitude inside the free length; sideways: an
+    11 s sine of up to 1.2 m (80 % of the narrower side), starting in the middle; the camera turns
+    by up to 12 deg towards the middle and is held level (body pitched up 8 deg against the
+    camera's 10 deg mount); hand jitter of a few cm and deg at 0.3-2.5 Hz.
+    """
+    ph = rng.uniform(0, 2 * math.pi, size=10)
+    f_along, f_cross = 1.0 / 14.0, 1.0 / 11.0
+    a_amp = min(0.8, 0.45 * lay.free_length_m)
+    a_mid = a_amp + min(0.1, 0.05 * lay.free_length_m)
+    c_amp = min(1.2, 0.8 * min(lay.free_left_m, lay.free_right_m))
+    along = Combo(((1.0, Polynomial(a_mid)), (a_amp, Sines((1.0,), (f_along,), (0.0,))),
+                   (1.0, Sines((0.03, 0.01), (0.9, 2.2), (ph[0], ph[1])))))
+    cross = Combo(((c_amp, Sines((1.0,), (f_cross,), (0.0,))),
+                   (1.0, Sines((0.03, 0.01), (1.1, 2.5), (ph[2], ph[3])))))
+    x, y = layout_xy(lay, along, cross)
+    z = Combo(((1.0, Polynomial(max(lay.body_height_m, 1.3))),
+               (1.0, Sines((0.05, 0.015), (0.3, 1.8), (ph[4], ph[5])))))
+    yaw = Combo(((1.0, Polynomial(lay.heading_rad)),
+                 (-math.radians(12.0), Sines((1.0,), (f_cross,), (0.0,))),
+                 (1.0, Sines((math.radians(3.0), math.radians(1.0)), (0.6, 2.1), (ph[6], ph[7])))))
+    pitch = Combo(((1.0, Polynomial(-math.radians(8.0))),
+                   (1.0, Sines((math.radians(4.0), math.radians(1.5)), (0.25, 1.6), (ph[8], ph[9])))))
+    roll = Sines((math.radians(4.0), math.radians(1.5)), (0.3, 1.9), (ph[9], ph[0]))
+    return x, y, z, yaw, pitch, roll
+
+
 def make_motion(
     kind: str,
     duration_s: float,
     layout: MotionLayout | None = None,
     seed: int = 0,
     blur_bursts: Sequence[BlurBurst] = (),
-) -> EulerMotion:
+) -> EulerMotion | UnicycleMotion:
     """One of the synthetic motions (``MOTION_KINDS``) that stays inside ``layout``.
 
     forward-stop-turn: rest, then drive ~2.5 m, stop, turn in place +-35 deg and back (corridor) or a
     square loop with 90 deg turns (room). constant-velocity: straight, constant speed (degenerate
     for scale). rough-floor: forward at constant speed with 8-15 Hz pitch/roll vibration of
     1-2 deg and mm-level bounce. handheld: walking pace plus aggressive 6-DoF sinusoids.
+    wall-scan: a hand-held camera in front of what lies ahead (the wall scene: a textured wall
+    1.3-2.9 m away), swept sideways (+-1.2 m, 11 s period) and towards and away from it (14 s
+    period), turned towards the middle, with hand jitter. start-in-turn, turn-in-place: wheeled
+    robots that follow their heading (amrvio.sim.motions_robot.make_robot_motion).
     ``blur_bursts`` add fast yaw oscillations (they are part of the trajectory, so of the IMU).
     """
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise ConfigError(f"motion duration must be > 0 s, got {duration_s}")
     lay = layout if layout is not None else MotionLayout()
+    if kind in ROBOT_MOTION_KINDS:
+        return make_robot_motion(kind, float(duration_s), lay, blur_bursts)
     rng = np.random.default_rng(seed)
     zero: Signal = Polynomial()
     x: Signal
@@ -155,6 +192,8 @@ def make_motion(
                      (1.0, Sines((math.radians(20), math.radians(4)), (0.25, 2.3), (ph[6], ph[7]))),))
         pitch = Sines((math.radians(10), math.radians(3)), (0.4, 1.7), (ph[8], ph[9]))
         roll = Sines((math.radians(8), math.radians(3)), (0.55, 2.0), (ph[10], ph[11]))
+    elif kind == "wall-scan":
+        x, y, z, yaw, pitch, roll = _wall_scan(lay, rng)
     else:
         raise ConfigError(f"unknown motion {kind!r}; choose one of {', '.join(MOTION_KINDS)}")
     return EulerMotion(kind, x, y, z, with_bursts(yaw, blur_bursts), pitch, roll, float(duration_s))
