@@ -4,7 +4,9 @@ Frames are stamped at mid-exposure: frame k has stamp t_k = (k + 1/2) / fps (mot
 integrates the scene over [t_k - T_k/2, t_k + T_k/2]. Ground truth (T_world_body, velocity and the
 true IMU biases) is written at the IMU stamps. Replay keeps the source stamps and world frame; the
 renderer sees the trajectory shifted horizontally into the scene (``T_scene_world`` in
-sim_config.yaml).
+sim_config.yaml). Lens black-outs (``blackouts``, amrvio.sim.blackout) darken the frames exposed
+while the lens is covered; everything else goes on, and sim_config.yaml lists the dark frames
+(``derived.blackouts``).
 """
 
 from __future__ import annotations
