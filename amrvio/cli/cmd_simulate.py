@@ -6,6 +6,11 @@ import argparse
 import sys
 
 NAME = "simulate"
+# amrvio.sim.simulate.SCENES and MOTIONS (kept here so that building the parser imports no
+# simulator code; tests/sim/test_simulate.py checks that they agree)
+SCENE_CHOICES = ("corridor", "warehouse", "room", "wall")
+MOTION_CHOICES = ("forward-stop-turn", "constant-velocity", "rough-floor", "handheld", "wall-scan",
+                  "start-in-turn", "turn-in-place", "replay")
 HELP = "simulate a camera + IMU + wheel-odometry sequence with ground truth (ASL/EuRoC layout)"
 
 
@@ -18,11 +23,20 @@ def _resolution(text: str) -> tuple[int, int]:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scene", choices=("corridor", "warehouse", "room"), default="corridor")
+    parser.add_argument("--scene", choices=SCENE_CHOICES, default="corridor",
+                        help="corridor (2.4 m wide), warehouse (aisle between racks), room (8 x 8 m, "
+                        "clutter near the walls), wall (one textured planar wall, 14 x 5 m)")
     parser.add_argument(
         "--motion",
-        choices=("forward-stop-turn", "constant-velocity", "rough-floor", "handheld", "replay"),
+        choices=MOTION_CHOICES,
         default="forward-stop-turn",
+        help="forward-stop-turn: rest, drive, stop, turn in place (room: square loop); "
+        "constant-velocity; rough-floor: vibration; handheld: walking, aggressive 6-DoF; "
+        "wall-scan: hand-held 1.3-2.9 m in front of what lies ahead (for --scene wall); "
+        "start-in-turn: robot moving (0.3 m/s, speeding up to 0.5) and turning at 0.4 rad/s from the "
+        "first frame, the turn fading out after 2 s (corridor, warehouse: then straight; room: a "
+        "loop of 90 deg corners); turn-in-place: robot driving at 0.5 m/s stops, turns 30 deg in "
+        "place in 2 s and drives on; replay: follow --trajectory",
     )
     parser.add_argument("--trajectory", metavar="GT_FILE",
                         help="replay: ground truth to follow (EuRoC CSV or TUM)")
@@ -60,6 +74,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--camera-model", choices=("pinhole", "radtan"), default="pinhole")
     parser.add_argument("--blur-bursts", default="", metavar="T0:DUR:OMEGA,...",
                         help="fast yaw oscillations (peak rad/s) added to the motion")
+    parser.add_argument("--blackout", action="append", default=[], metavar="T0:DUR,...",
+                        help="cover the lens over [T0, T0+DUR) seconds (repeatable or "
+                        "comma-separated): frames exposed then are near-black (read noise only) "
+                        "while the motion, IMU and wheel data go on; sim_config.yaml lists the dark "
+                        "frames under derived.blackouts")
     parser.add_argument("--wheel-slips", default="", metavar="T0:DUR:SLIP,...")
     parser.add_argument("--out", required=True, metavar="DIR")
     parser.add_argument("--force", action="store_true", help="overwrite a non-empty DIR")
@@ -92,6 +111,7 @@ def run(args: argparse.Namespace) -> int:
         ev_steps=args.ev_steps,
         auto_exposure=args.auto_exposure,
         blur_bursts=args.blur_bursts,
+        blackouts=",".join(args.blackout),
         wheel_slips=args.wheel_slips,
         trajectory=args.trajectory,
         imu_csv=args.imu,
@@ -115,5 +135,6 @@ def run(args: argparse.Namespace) -> int:
         f"({summary.imu_source}), {summary.n_wheel} wheel readings, {summary.duration_s:.2f} s, "
         f"path {summary.path_length_m:.2f} m, max smear {summary.max_smear_px:.1f} px, "
         f"exposure {summary.exposure_ms_min:.3f}-{summary.exposure_ms_max:.3f} ms"
+        + (f", {summary.dark_frames} dark frames (lens covered)" if summary.dark_frames else "")
     )
     return 0

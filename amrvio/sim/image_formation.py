@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
 from amrvio.photometric.model import RadialVignette
+from amrvio.sim.blackout import open_pieces
 from amrvio.sim.render import SceneRenderer
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import SE3
@@ -187,7 +188,9 @@ def expose(
 @dataclass(frozen=True, slots=True, eq=False)
 class RenderedFrame:
     """One exposed frame. smear_px_*: predicted image-motion path length over the exposure (pixels),
-    maximum over the image and at the principal point. T_world_cam_mid: pose at mid-exposure."""
+    maximum over the image and at the principal point, while light was collected.
+    T_world_cam_mid: pose at mid-exposure. open_fraction: the share of the exposure during which
+    the lens was not covered (1 normally, 0 for a frame exposed inside a black-out)."""
 
     image: U8
     n_subframes: int
@@ -196,6 +199,7 @@ class RenderedFrame:
     T_world_cam_mid: SE3
     t_mid_s: float
     exposure_s: float
+    open_fraction: float = 1.0
 
 
 @functools.lru_cache(maxsize=8)
@@ -251,34 +255,22 @@ def predict_smear(
     return float(length[ok].max()), float(length[ic]) if ok[ic] else 0.0
 
 
-def render_frame(
+def _integrate(
     renderer: SceneRenderer,
     pose_at: Callable[[float], SE3],
     t_start_s: float,
-    exposure_s: float,
-    sensor: SensorModel,
-    rng: np.random.Generator | None,
-    blur: bool = True,
-    max_subframe_px: float = 0.5,
-    max_subframes: int = 257,
-) -> RenderedFrame:
-    """Render and expose one frame over ``[t_start_s, t_start_s + exposure_s]``.
-
-    ``pose_at(t)`` gives T_world_cam at time t (seconds). With ``blur`` the radiance is the average
-    of ``n`` sub-frame renders at the midpoints of n equal sub-intervals (seed §5 temporal
-    integral), with ``n = ceil(smear / max_subframe_px) + 1`` made odd (the mid-exposure render is
-    reused), capped at ``max_subframes``. Without blur: one render at mid-exposure.
-    """
-    if not (math.isfinite(exposure_s) and exposure_s > 0):
-        raise ShapeError(f"exposure_s must be positive, got {exposure_s}")
-    if max_subframe_px <= 0 or max_subframes < 1:
-        raise ShapeError("max_subframe_px must be > 0 and max_subframes >= 1")
-    t_mid = t_start_s + 0.5 * exposure_s
-    T_mid = pose_at(t_mid)
+    dur_s: float,
+    blur: bool,
+    max_subframe_px: float,
+    max_subframes: int,
+) -> tuple[F32, int, float, float]:
+    """Radiance canvas averaged over [t_start_s, t_start_s + dur_s] (sub-frame count from the
+    smear, see render_frame), the sub-frame count and the smear (max, at the principal point)."""
+    T_mid = pose_at(t_start_s + 0.5 * dur_s)
     canvas, inv_z = renderer.canvas_irradiance(T_mid)
     depth = renderer.finish_depth(inv_z)
     n_path = 8
-    path = [pose_at(t_start_s + exposure_s * k / n_path) for k in range(n_path + 1)]
+    path = [pose_at(t_start_s + dur_s * k / n_path) for k in range(n_path + 1)]
     smear_max, smear_center = predict_smear(renderer.camera, depth, T_mid, path)
     n = 1
     if blur and smear_max > 0.0:
@@ -289,10 +281,62 @@ def render_frame(
         acc = np.zeros(canvas.shape, np.float64)
         for i in range(n):
             if 2 * i + 1 == n:
-                acc += canvas  # the mid-exposure sub-frame
+                acc += canvas  # the mid sub-frame
             else:
-                acc += renderer.canvas_irradiance(pose_at(t_start_s + exposure_s * (i + 0.5) / n))[0]
+                acc += renderer.canvas_irradiance(pose_at(t_start_s + dur_s * (i + 0.5) / n))[0]
         canvas = (acc / n).astype(np.float32)
-    irradiance = renderer.finish_irradiance(canvas)
+    return canvas, n, smear_max, smear_center
+
+
+def render_frame(
+    renderer: SceneRenderer,
+    pose_at: Callable[[float], SE3],
+    t_start_s: float,
+    exposure_s: float,
+    sensor: SensorModel,
+    rng: np.random.Generator | None,
+    blur: bool = True,
+    max_subframe_px: float = 0.5,
+    max_subframes: int = 257,
+    lens_covered: Sequence[tuple[float, float]] = (),
+) -> RenderedFrame:
+    """Render and expose one frame over ``[t_start_s, t_start_s + exposure_s]``.
+
+    ``pose_at(t)`` gives T_world_cam at time t (seconds). With ``blur`` the radiance is the average
+    of ``n`` sub-frame renders at the midpoints of n equal sub-intervals (seed §5 temporal
+    integral), with ``n = ceil(smear / max_subframe_px) + 1`` made odd (the mid-exposure render is
+    reused), capped at ``max_subframes``. Without blur: one render at mid-exposure.
+    ``lens_covered``: time intervals [a, b) during which no light reaches the sensor (a covered
+    lens, amrvio.sim.blackout); the collected energy is the integral over the uncovered parts only
+    (each integrated as above), so a frame exposed inside them is the response to zero irradiance:
+    read noise only.
+    """
+    if not (math.isfinite(exposure_s) and exposure_s > 0):
+        raise ShapeError(f"exposure_s must be positive, got {exposure_s}")
+    if max_subframe_px <= 0 or max_subframes < 1:
+        raise ShapeError("max_subframe_px must be > 0 and max_subframes >= 1")
+    t_mid = t_start_s + 0.5 * exposure_s
+    pieces = open_pieces(t_start_s, exposure_s, lens_covered)
+    if pieces == [(t_start_s, exposure_s)]:  # the lens is open over the whole exposure
+        canvas, n, smear_max, smear_center = _integrate(renderer, pose_at, t_start_s, exposure_s, blur,
+                                                        max_subframe_px, max_subframes)
+        irradiance = renderer.finish_irradiance(canvas)
+        open_fraction = 1.0
+    else:
+        acc: F32 | None = None
+        n, smear_max, smear_center, open_s = 0, 0.0, 0.0, 0.0
+        for a, d in pieces:
+            c, k, s_max, s_center = _integrate(renderer, pose_at, a, d, blur, max_subframe_px,
+                                               max_subframes)
+            # energy of the piece = its mean radiance x its duration (the exposure is applied below)
+            part = c * np.float32(d / exposure_s)
+            acc = part if acc is None else acc + part
+            n, open_s = n + k, open_s + d
+            smear_max, smear_center = max(smear_max, s_max), max(smear_center, s_center)
+        cam = renderer.camera
+        irradiance = (np.zeros((cam.height, cam.width), np.float32) if acc is None
+                      else renderer.finish_irradiance(acc))
+        open_fraction = open_s / exposure_s
     image = expose(irradiance, exposure_s, sensor, rng)
-    return RenderedFrame(image, n, smear_max, smear_center, T_mid, t_mid, exposure_s)
+    return RenderedFrame(image, n, smear_max, smear_center, pose_at(t_mid), t_mid, exposure_s,
+                         open_fraction)

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from amrvio.errors import ConfigError
-from amrvio.sim.motion import Motion, MotionState
+from amrvio.sim.kinematics import Motion, MotionState
 from amrvio.types.sensors import ImuData, ImuNoise
 
 F64 = NDArray[np.float64]

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from amrvio.errors import ConfigError
-from amrvio.sim.motion import MotionState, _MotionBase, _times
+from amrvio.sim.kinematics import MotionState, _MotionBase, _times
 from amrvio.types.lie import quat_wxyz_to_matrix
 
 F64 = NDArray[np.float64]

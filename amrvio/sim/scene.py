@@ -11,8 +11,10 @@ fills the sensor's range at exposure ``t`` seconds and unit gain (see image_form
 
 Scenes: ``corridor`` (indoor AMR corridor, 2.4 m wide, 3 m high, 50 m long, doorways, posters,
 boxes, ceiling lights), ``warehouse`` (3 m aisle between 6 m racks with boxes), ``room`` (8 x 8 x 4 m
-with boxes, tables and posters, like the EuRoC Vicon room). The robot drives along +x in the corridor
-and the aisle.
+with boxes, tables and posters, like the EuRoC Vicon room), ``wall`` (one textured planar wall,
+14 x 5 m, at x = 3 m, tiled with photographs and noise textures, and a dim floor: a scene dominated
+by one plane, in front of which a camera is carried at 1-3 m). The robot drives along +x in the
+corridor and the aisle; in front of the wall +x points at the wall.
 """
 
 from __future__ import annotations
@@ -29,8 +31,8 @@ from amrvio.sim import textures as tx
 F64 = NDArray[np.float64]
 F32 = NDArray[np.float32]
 
-SceneName = Literal["corridor", "warehouse", "room"]
-SCENE_NAMES: tuple[str, ...] = ("corridor", "warehouse", "room")
+SceneName = Literal["corridor", "warehouse", "room", "wall"]
+SCENE_NAMES: tuple[str, ...] = ("corridor", "warehouse", "room", "wall")
 
 # Radiance of a fully lit surface: albedo 1 saturates the sensor at 10 ms exposure and unit gain.
 BASE_RADIANCE = 100.0
@@ -214,7 +216,7 @@ class _Builder:
         )
 
     def poster(self, top_left: ArrayLike, right: ArrayLike, width_m: float, height_m: float,
-               tex: str) -> None:
+               tex: str, name: str = "poster") -> None:
         """An upright picture: one unmirrored copy of the photo across ``width_m``."""
         r = np.asarray(right, dtype=np.float64)
         r = r / np.linalg.norm(r)
@@ -224,7 +226,7 @@ class _Builder:
         a, b = r * width_m, np.array([0.0, 0.0, -height_m])
         corners = np.stack([p0, p0 + a, p0 + a + b, p0 + b])
         self.quads.append(Quad(corners, tid, half / width_m, BASE_RADIANCE * 0.8, (0.0, 0.0), True,
-                               "poster"))
+                               name))
 
     def box(self, lo: ArrayLike, hi: ArrayLike, tex: str, tpm: float, name: str = "box",
             bottom: bool = False) -> None:
@@ -435,6 +437,40 @@ def _room(seed: int) -> Scene:
     )
 
 
+WALL_X_M = 3.0  # the wall scene's wall is the plane x = WALL_X_M (normal -x, towards the camera)
+
+
+def _wall(seed: int) -> Scene:
+    """One planar wall (x = WALL_X_M, y in [-7, 7] m, z in [0, 5] m) made of 14 x 5 coplanar 1 m
+    tiles, each a randomly placed crop of a photograph, noise, brick or gravel texture (neighbours
+    differ), so the wall has corners everywhere and no repeated pattern. The tiles share one plane
+    exactly (no poster offset): every wall pixel obeys one homography. A dim floor lies in front of
+    it; nothing else is in the scene."""
+    b = _Builder(seed)
+    xw, half_w, h, cols, rows = WALL_X_M, 7.0, 5.0, 14, 5
+    b.rect((-4.0, -half_w, 0), (xw + 4.0, 0, 0), (0, 2 * half_w, 0), "noise0", 300.0, 0.5,
+           name="floor")
+    # dark or flat photographs (rocket: night sky, horse: a silhouette) are left out
+    keys = ("camera", "noise2", "astronaut", "brick", "motorcycle", "noise9", "chelsea", "gravel",
+            "coffee", "noise5", "coins", "noise7", "page", "noise3", "text", "moon", "noise8")
+    tw, th = 2.0 * half_w / cols, h / rows
+    for j in range(rows):
+        for i in range(cols):
+            key = keys[(i + 5 * j) % len(keys)]
+            shade = float(b.rng.uniform(0.65, 0.85))
+            # seen from the front (looking along +x), image right is -y and image down is -z
+            b.rect((xw, half_w - i * tw, h - j * th), (0, -tw, 0), (0, 0, -th), key, 400.0, shade,
+                   name="wall")
+    return b.scene(
+        "wall",
+        start_position_m=np.array([0.0, 0.0, 0.0]),
+        start_yaw_rad=0.0,
+        drive_length_m=1.8,
+        free_xy_min=np.array([-0.3, -3.0]),
+        free_xy_max=np.array([xw - 1.1, 3.0]),
+    )
+
+
 def make_scene(name: SceneName | str, seed: int = 0) -> Scene:
     """Build the named scene. Same ``seed`` -> identical geometry and textures."""
     if name == "corridor":
@@ -443,4 +479,6 @@ def make_scene(name: SceneName | str, seed: int = 0) -> Scene:
         return _warehouse(seed)
     if name == "room":
         return _room(seed)
+    if name == "wall":
+        return _wall(seed)
     raise ShapeError(f"unknown scene {name!r}; choose one of {', '.join(SCENE_NAMES)}")

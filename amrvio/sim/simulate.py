@@ -4,7 +4,9 @@ Frames are stamped at mid-exposure: frame k has stamp t_k = (k + 1/2) / fps (mot
 integrates the scene over [t_k - T_k/2, t_k + T_k/2]. Ground truth (T_world_body, velocity and the
 true IMU biases) is written at the IMU stamps. Replay keeps the source stamps and world frame; the
 renderer sees the trajectory shifted horizontally into the scene (``T_scene_world`` in
-sim_config.yaml).
+sim_config.yaml). Lens black-outs (``blackouts``, amrvio.sim.blackout) darken the frames exposed
+while the lens is covered; everything else goes on, and sim_config.yaml lists the dark frames
+(``derived.blackouts``).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ConfigError
+from amrvio.sim.blackout import Blackout, frames_touched, parse_blackouts
 from amrvio.sim.exposure_control import (
     AutoExposure,
     ExposureLimits,
@@ -35,6 +38,7 @@ from amrvio.sim.motion import (
     make_motion,
     parse_blur_bursts,
 )
+from amrvio.sim.scene import SCENE_NAMES
 from amrvio.sim.wheel import SlipEpisode
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import SE3, SO3
@@ -42,7 +46,7 @@ from amrvio.types.sensors import ImuData, ImuNoise
 
 F64 = NDArray[np.float64]
 
-SCENES: tuple[str, ...] = ("corridor", "warehouse", "room")
+SCENES: tuple[str, ...] = SCENE_NAMES
 MOTIONS: tuple[str, ...] = (*MOTION_KINDS, "replay")
 # EuRoC cam0 radial-tangential coefficients (k1, k2, p1, p2), used for camera_model="radtan".
 EUROC_RADTAN = (-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05)
@@ -62,7 +66,8 @@ class SimConfig:
     read noise, ``response_gamma`` shapes the response curve (1 = linear) and ``vignette_v1`` the
     radial fall-off V = 1 + v1 r^2 (amrvio.sim.image_formation.SensorModel). Exposure:
     ``exposure_ms`` base, optional ``ev_steps`` ("t:ev,..." relative steps) or ``auto_exposure``.
-    ``blur_bursts``: "t0:dur:omega,..." fast yaw oscillations added to the motion. ``wheel_slips``:
+    ``blur_bursts``: "t0:dur:omega,..." fast yaw oscillations added to the motion. ``blackouts``:
+    "t0:dur,..." time ranges with the lens covered (amrvio.sim.blackout). ``wheel_slips``:
     "t0:dur:slip,...". Replay: ``trajectory`` (EuRoC CSV or TUM), optional ``imu_csv`` (EuRoC imu0
     layout, used instead of the synthetic IMU) and ``cam_extrinsic`` (a sensor.yaml with T_BS).
     """
@@ -90,6 +95,7 @@ class SimConfig:
     ev_steps: str = ""
     auto_exposure: bool = False
     blur_bursts: str = ""
+    blackouts: str = ""
     wheel_rate_hz: float = 50.0
     wheel_scale_error: float = 0.02
     wheel_slips: str = ""
@@ -141,6 +147,7 @@ class SimConfig:
             raise ConfigError(f"--seed must be >= 0, got {self.seed}")
         parse_ev_steps(self.ev_steps)
         parse_blur_bursts(self.blur_bursts)
+        parse_blackouts(self.blackouts, self.seconds)
         parse_slips(self.wheel_slips)
 
 
@@ -156,6 +163,7 @@ class SimSummary:
     exposure_ms_min: float
     exposure_ms_max: float
     imu_source: str
+    dark_frames: int = 0  # frames exposed entirely while the lens was covered (--blackout)
 
 
 def parse_slips(spec: str) -> tuple[SlipEpisode, ...]:
@@ -186,17 +194,28 @@ def make_camera(config: SimConfig) -> CameraModel:
 
 
 def layout_for_scene(scene: Any) -> MotionLayout:
-    """The motion layout inside a Scene's free floor area (room: a square loop)."""
+    """The motion layout inside a Scene's free floor area (room: a square loop).
+
+    The free space to the left, right and behind of the start is measured across and along the
+    start heading inside the scene's free rectangle (every scene's start heading is axis-aligned).
+    """
     lo = np.asarray(scene.free_xy_min, dtype=np.float64)
     hi = np.asarray(scene.free_xy_max, dtype=np.float64)
     if scene.name == "room":
         side = float(min(hi - lo)) - 1.0
-        return MotionLayout(start_xy=(float(lo[0]) + 0.5, float(lo[1]) + 0.5), heading_rad=0.0,
-                            free_length_m=side, loop_side_m=side)
-    start = np.asarray(scene.start_position_m, dtype=np.float64)
-    return MotionLayout(start_xy=(float(start[0]), float(start[1])),
-                        heading_rad=float(scene.start_yaw_rad),
-                        free_length_m=float(scene.drive_length_m))
+        start = lo + 0.5
+        heading, length, loop = 0.0, side, side
+    else:
+        start = np.asarray(scene.start_position_m, dtype=np.float64)[:2]
+        heading, length, loop = float(scene.start_yaw_rad), float(scene.drive_length_m), None
+    corners = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]]) - start
+    fwd = np.array([math.cos(heading), math.sin(heading)])
+    left = np.array([-fwd[1], fwd[0]])
+    return MotionLayout(start_xy=(float(start[0]), float(start[1])), heading_rad=heading,
+                        free_length_m=length, loop_side_m=loop,
+                        free_left_m=max(0.0, float((corners @ left).max())),
+                        free_right_m=max(0.0, float(-(corners @ left).min())),
+                        free_behind_m=max(0.0, float(-(corners @ fwd).min())))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -312,6 +331,20 @@ def _plain(x: Any) -> Any:
     return x
 
 
+def _blackout_records(blackouts: tuple[Blackout, ...], t_starts: list[float], exposures: list[float],
+                      stamps: list[int]) -> list[dict[str, Any]]:
+    """sim_config.yaml ``derived.blackouts``: per black-out its range, the first and last frame
+    exposed entirely inside it (index and stamp; empty when none) and the partly covered frames."""
+    out: list[dict[str, Any]] = []
+    for b in blackouts:
+        f = frames_touched(b, t_starts, exposures)
+        dark = [f.dark[0], f.dark[-1]] if f.dark else []
+        out.append({"t0_s": b.t0_s, "dur_s": b.dur_s, "dark_frames": dark,
+                    "dark_stamps_ns": [stamps[k] for k in dark],
+                    "partly_covered_frames": list(f.partial)})
+    return out
+
+
 def simulate(config: SimConfig, out_dir: Path, progress: Progress | None = None,
              force: bool = False) -> SimSummary:
     """Run the simulation and write the sequence to ``out_dir`` (see amrvio.sim.writer)."""
@@ -370,7 +403,10 @@ def simulate(config: SimConfig, out_dir: Path, progress: Progress | None = None,
     def pose_at(t: float) -> SE3:
         return T_scene_world @ motion.T_world_body(t) @ T_body_cam
 
+    blackouts = parse_blackouts(config.blackouts, config.seconds)
+    covered = [(b.t0_s, b.t1_s) for b in blackouts]
     exposures: list[float] = []
+    t_starts: list[float] = []
     records: list[FrameRecord] = []
     max_smear = 0.0
     exposure = base
@@ -381,12 +417,13 @@ def simulate(config: SimConfig, out_dir: Path, progress: Progress | None = None,
         t0 = float(t_frames[k]) - 0.5 * exposure
         frame = render_frame(renderer, pose_at, t0, exposure, sensor,
                              rngs[3] if config.sensor_noise else None, blur=config.blur,
-                             max_subframe_px=config.max_subframe_px)
+                             max_subframe_px=config.max_subframe_px, lens_covered=covered)
         writer.write_frame(stamps[k], frame.image)
         exposures.append(exposure)
+        t_starts.append(t0)
         records.append(FrameRecord(stamps[k], exposure, float(frame.smear_px_max),
                                    float(frame.smear_px_center), int(frame.n_subframes),
-                                   float(frame.image.mean())))
+                                   float(frame.image.mean()), float(frame.open_fraction)))
         max_smear = max(max_smear, float(frame.smear_px_max))
         if ae is not None:
             exposure = ae.next_exposure(exposure, float(frame.image.mean()), limits)
@@ -415,10 +452,11 @@ def simulate(config: SimConfig, out_dir: Path, progress: Progress | None = None,
             "stamp_of_motion_time_zero_ns": src.stamp0_ns,
             "sensor": repr(sensor),
             "n_frames": n_frames,
+            "blackouts": _blackout_records(blackouts, t_starts, exposures, stamps),
         }),
     }
     writer.write_config(record)
     return SimSummary(out_dir, n_frames, len(src.imu), int(wheel.stamps_ns.shape[0]),
                       motion.duration_s, path_len, max_smear,
                       1e3 * min(exposures, default=0.0), 1e3 * max(exposures, default=0.0),
-                      src.imu_source)
+                      src.imu_source, sum(r.lens_open_fraction == 0.0 for r in records))

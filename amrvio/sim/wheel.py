@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ConfigError
-from amrvio.sim.motion import Motion
+from amrvio.sim.kinematics import Motion
 
 F64 = NDArray[np.float64]
 

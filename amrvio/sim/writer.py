@@ -9,8 +9,10 @@ OUT/
   vignette.png      16-bit vignette, max = 65535
   wheel_odometry.csv
   sim_frames.csv    per frame: t_ns, exposure_s, true smear (max over the image and at the
-                    principal point, px), sub-frames averaged, mean intensity (DN)
-  sim_config.yaml   every parameter and the seed
+                    principal point, px), sub-frames averaged, mean intensity (DN), the share of
+                    the exposure with the lens uncovered (0 in a --blackout)
+  sim_config.yaml   every parameter and the seed; under derived.blackouts the frames each
+                    black-out darkened
 
 The yaml, pcalib and vignette writers are amrvio.io.calib's. Every float is written with a
 fixed or shortest-round-trip format and nothing records the wall
@@ -53,7 +55,10 @@ def ns_to_s_text(t_ns: int) -> str:
     return f"{sign}{a // 1_000_000_000}.{a % 1_000_000_000:09d}"
 
 
-SIM_FRAMES_HEADER = "t_ns,exposure_s,smear_px_max,smear_px_center,n_subframes,mean_intensity_dn"
+SIM_FRAMES_HEADER = ("t_ns,exposure_s,smear_px_max,smear_px_center,n_subframes,mean_intensity_dn,"
+                     "lens_open_fraction")
+# written before black-outs existed (no lens_open_fraction column: the lens was always open)
+_SIM_FRAMES_HEADER_V1 = "t_ns,exposure_s,smear_px_max,smear_px_center,n_subframes,mean_intensity_dn"
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,7 +68,8 @@ class FrameRecord:
     ``smear_px_max`` / ``smear_px_center``: image-motion path length of the visible scene points
     over the exposure (rotation and translation, from the depth map), max over the image and at
     the principal point (amrvio.sim.image_formation.predict_smear). ``mean_intensity_dn``: mean of
-    the written 8-bit image.
+    the written 8-bit image. ``lens_open_fraction``: share of the exposure during which the lens was
+    not covered (amrvio.sim.blackout; 0: a dark frame).
     """
 
     t_ns: int
@@ -72,6 +78,7 @@ class FrameRecord:
     smear_px_center: float
     n_subframes: int
     mean_intensity_dn: float
+    lens_open_fraction: float = 1.0
 
 
 def write_frames_csv(path: Path, records: Sequence[FrameRecord]) -> None:
@@ -79,7 +86,8 @@ def write_frames_csv(path: Path, records: Sequence[FrameRecord]) -> None:
     lines = [SIM_FRAMES_HEADER]
     for r in records:
         lines.append(f"{int(r.t_ns)},{_f(r.exposure_s)},{_f(r.smear_px_max)},"
-                     f"{_f(r.smear_px_center)},{int(r.n_subframes)},{_f(r.mean_intensity_dn)}")
+                     f"{_f(r.smear_px_center)},{int(r.n_subframes)},{_f(r.mean_intensity_dn)},"
+                     f"{_f(r.lens_open_fraction)}")
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
@@ -88,20 +96,22 @@ def read_frames_csv(path: Path) -> list[FrameRecord]:
     from amrvio.errors import DatasetFormatError
 
     text = Path(path).read_text(encoding="utf-8").splitlines()
-    if not text or text[0].strip() != SIM_FRAMES_HEADER:
+    header = text[0].strip() if text else ""
+    if header not in (SIM_FRAMES_HEADER, _SIM_FRAMES_HEADER_V1):
         raise DatasetFormatError(path, f"expected the header {SIM_FRAMES_HEADER!r}", line=1)
+    n_fields = header.count(",") + 1
     out: list[FrameRecord] = []
     for i, line in enumerate(text[1:], start=2):
         if not line.strip():
             continue
         v = line.split(",")
         try:
-            if len(v) != 6:
+            if len(v) != n_fields:
                 raise ValueError
             out.append(FrameRecord(int(v[0]), float(v[1]), float(v[2]), float(v[3]), int(v[4]),
-                                   float(v[5])))
+                                   float(v[5]), float(v[6]) if n_fields == 7 else 1.0))
         except ValueError:
-            raise DatasetFormatError(path, "expected 6 numeric fields", line=i) from None
+            raise DatasetFormatError(path, f"expected {n_fields} numeric fields", line=i) from None
     return out
 
 

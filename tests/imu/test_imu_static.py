@@ -12,7 +12,7 @@ from amrvio.imu.static import (
     initial_standstill,
 )
 from amrvio.sim.imu_synth import synthesize_imu
-from amrvio.sim.motion import EulerMotion, Polynomial, euler_zyx_matrix
+from amrvio.sim.kinematics import EulerMotion, Polynomial, euler_zyx_matrix
 from amrvio.types.sensors import ImuData, ImuNoise
 
 G = 9.81

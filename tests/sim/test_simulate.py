@@ -296,7 +296,7 @@ def test_cli_simulate_writes_and_refuses_to_overwrite(tmp_path: Path,
         assert err and "\n" not in err and "Traceback" not in err, bad
 
 
-@pytest.mark.parametrize("scene_name", ["corridor", "warehouse", "room"])
+@pytest.mark.parametrize("scene_name", ["corridor", "warehouse", "room", "wall"])
 def test_every_motion_stays_in_the_free_floor_area(scene_name: str) -> None:
     from amrvio.sim.motion import MOTION_KINDS
     from amrvio.sim.scene import make_scene
