@@ -42,22 +42,26 @@ def _majority(bits: NDArray[np.uint8], label: I64, k: int) -> U8:
 
 
 def k_majority(desc: U8, k: int, rng: np.random.Generator, iterations: int = 8) -> U8:
-    """At most ``k`` (K, 32) centers of the (N, 32) descriptors: k-means++ seeding (Arthur and
-    Vassilvitskii 2007) with Hamming distances, then Lloyd iterations with bitwise-majority
-    centers. Fewer than ``k`` distinct descriptors give fewer centers."""
+    """At most ``k`` (K, 32) centers of the (N, 32) descriptors: greedy k-means++ seeding (Arthur
+    and Vassilvitskii 2007) with Hamming distances, then Lloyd iterations with bitwise-majority
+    centers (a center left without members is dropped). Fewer than ``k`` distinct descriptors give
+    fewer centers."""
     if len(desc) <= k:
         uniq = np.unique(desc, axis=0)
         if len(uniq) <= k:
             return uniq
     centers = [int(rng.integers(len(desc)))]
-    dmin = hamming_matrix(desc, desc[centers]).min(axis=1).astype(np.float64)
+    dmin = hamming_matrix(desc, desc[centers])[:, 0].astype(np.float64)
+    trials = 2 + int(np.log(k))  # greedy k-means++: the best of a few draws (as scikit-learn)
     while len(centers) < k:
         w = dmin**2
         if w.sum() <= 0:
             break
-        nxt = int(rng.choice(len(desc), p=w / w.sum()))
-        centers.append(nxt)
-        dmin = np.minimum(dmin, hamming_matrix(desc, desc[[nxt]])[:, 0])
+        cand = rng.choice(len(desc), size=trials, p=w / w.sum())
+        d_new = np.minimum(dmin[:, None], hamming_matrix(desc, desc[cand]).astype(np.float64))
+        best = int(np.argmin((d_new**2).sum(axis=0)))
+        centers.append(int(cand[best]))
+        dmin = d_new[:, best]
     c = desc[centers].copy()
     bits = np.unpackbits(desc, axis=1)
     for _ in range(iterations):
