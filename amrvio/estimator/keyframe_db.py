@@ -32,7 +32,7 @@ class KeyframeEntry:
 
 VOCABULARY_BRANCHING = 32
 """Two levels of 32: 1024 words."""
-VOCABULARY_TRAIN_MAX = 10_000
+VOCABULARY_TRAIN_MAX = 5_000
 """Descriptors the vocabulary is trained on at most (sampled evenly over the keyframes)."""
 
 
