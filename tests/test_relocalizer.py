@@ -88,6 +88,20 @@ def test_centroid_angle_brute_force_and_rotation() -> None:
     assert np.max(np.abs(d90)) < 1e-6
 
 
+def test_descriptor_at_the_edge_margin_does_not_see_the_border() -> None:
+    """A pixel EDGE_PX from the image edge gets the descriptor it has in a larger image (ORB pads
+    by reflection: a smaller margin would let the reflection into the descriptor)."""
+    img = _texture(300, 400, seed=3)
+    rng = np.random.default_rng(9)
+    uv = np.column_stack([rng.integers(150, 250, 60), rng.integers(60, 240, 60)]).astype(float)
+    _, full = describe_at(img, uv)
+    for i, (x, y) in enumerate(uv):
+        x0 = int(x) - EDGE_PX  # crop: the pixel is EDGE_PX from the crop's left edge
+        for crop, p in ((img[:, x0:], [EDGE_PX, y]), (img[:, : int(x) + EDGE_PX + 1], [x, y])):
+            idx, d = describe_at(np.ascontiguousarray(crop), np.array([p], dtype=float))
+            assert idx.tolist() == [0] and np.array_equal(d[0], full[i])
+
+
 def test_describe_at_drops_border_and_nan_and_checks_input() -> None:
     img = _texture()
     uv = np.array([[5.0, 100.0], [160.0, 120.0], [np.nan, 50.0], [300.0, 230.0], [100.0, 60.0]])

@@ -24,8 +24,10 @@ U8 = NDArray[np.uint8]
 
 PATCH_SIZE = 31
 """Side of the ORB patch (pixels on the keypoint's level); OpenCV's default."""
-EDGE_PX = 31
-"""ORB drops keypoints closer than this to the image border (OpenCV's ``edgeThreshold``)."""
+EDGE_PX = 22
+"""ORB drops keypoints closer than this to the image border (OpenCV's ``edgeThreshold``; its
+default is 31). 22 = ceil(15 sqrt 2), the reach of the rotated pattern: from 22 pixels on, a
+descriptor is the same as in a larger image (tested), below it the border reflection enters."""
 SCALE_FACTOR = 1.2
 """Pyramid scale between levels (OpenCV's and ORB-SLAM's default)."""
 DESCRIPTOR_BYTES = 32
