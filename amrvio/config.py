@@ -22,6 +22,7 @@ from amrvio.estimator.initializer import InitConfig
 from amrvio.estimator.local_mapping import MappingConfig
 from amrvio.estimator.scale_sources import ScaleConfig
 from amrvio.frontend.tracker import TrackingConfig
+from amrvio.pipeline.recovery import RecoveryConfig
 
 #: nested fields that the top-level ``seed`` replaces
 _SEED = "seed"
@@ -46,6 +47,7 @@ class PipelineConfig:
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     init: InitConfig = field(default_factory=InitConfig)
     mapping: MappingConfig = field(default_factory=MappingConfig)
+    recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
     scale: ScaleConfig = field(default_factory=ScaleConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
 
@@ -154,6 +156,20 @@ HELP: dict[str, str] = {
     "init.static_flow_px": "median flow under which the camera counts as at rest (px)",
     "init.min_pnp_inliers": "PnP inliers to pose a frame between the two views",
     "init.pnp_thresh_px": "PnP RANSAC threshold for those frames (px)",
+    "recovery": "relocalisation in the lost map (ORB keyframe retrieval + PnP) after a loss",
+    "recovery.enabled": "try relocalisation before starting a new map",
+    "recovery.max_features": "ORB descriptors kept per keyframe",
+    "recovery.reloc": "relocalisation gates (ORB-SLAM's)",
+    "recovery.reloc.n_corners": "corners of the tracker's detector described in the lost frame",
+    "recovery.reloc.n_features": "multi-scale ORB features added to them",
+    "recovery.reloc.ratio": "Lowe's ratio test of descriptor matches",
+    "recovery.reloc.max_hamming": "largest Hamming distance of an appearance match (of 256 bits)",
+    "recovery.reloc.min_matches": "matches a keyframe needs to be tried",
+    "recovery.reloc.max_candidates": "keyframes tried, best bag-of-words score first",
+    "recovery.reloc.pnp_thresh_px": "PnP inlier gate (px)",
+    "recovery.reloc.min_inliers": "inliers the final pose needs",
+    "recovery.reloc.search_radius_px": "radius of the search by projection (px)",
+    "recovery.reloc.guided_max_hamming": "largest Hamming distance in the search by projection",
     "mapping": "keyframes, triangulation and local bundle adjustment",
     "mapping.keyframes": "keyframe policy",
     "mapping.keyframes.max_gap": "frames at most between keyframes",

@@ -210,3 +210,23 @@ def test_two_view_pure_rotation_returns_the_rotation() -> None:
     assert res.status is TwoViewStatus.PURE_ROTATION
     assert np.abs(res.T_c2_c1[:3, :3] - R).max() < 1e-9
     assert np.allclose(res.T_c2_c1[:3, 3], 0.0)
+
+
+def test_two_view_tiny_forward_motion_over_a_floor_is_not_mistaken() -> None:
+    """A ground robot 2.5 cm into its drive: floor points below and far points ahead. Every
+    model fits at this baseline; the homography's other decomposition (moving along the floor
+    normal) is as consistent as the truth, so the answer is AMBIGUOUS or the true motion, never
+    the mirror one (seen on the simulator's turn-in-place: a wrong map from frame 1)."""
+    rng = np.random.default_rng(7)
+    floor = np.c_[rng.uniform(-2, 2, 900), np.full(900, 0.3), rng.uniform(1.0, 5.0, 900)]
+    far = np.c_[rng.uniform(-8, 8, 100), rng.uniform(-3, 0.2, 100), rng.uniform(20, 40, 100)]
+    X = np.vstack([floor, far])
+    t = np.array([0.0, 0.0, -0.025])
+    u1, u2 = _views(se3_matrix(np.eye(3), t), X)
+    ok_in = (u1[:, 0] > 0) & (u1[:, 0] < 640) & (u1[:, 1] > 0) & (u1[:, 1] < 480)
+    u2 = u2 + rng.normal(0, 0.3, u2.shape)
+    res = two_view_init(u1[ok_in], u2[ok_in], K)
+    if res.ok:
+        assert res.T_c2_c1[:3, 3] @ np.array([0.0, 0.0, -1.0]) > 0.98
+    else:
+        assert res.status in (TwoViewStatus.AMBIGUOUS, TwoViewStatus.LOW_PARALLAX)

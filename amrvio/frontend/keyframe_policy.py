@@ -23,6 +23,7 @@ class KeyframeReason(Enum):
     TRACK_RATIO = "track_ratio"
     FEW_COMMON = "few_common"
     PARALLAX = "parallax"
+    RELOCALISED = "relocalised"  # found again in the map after a loss
 
 
 @dataclass(frozen=True, slots=True)

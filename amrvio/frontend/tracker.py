@@ -163,6 +163,13 @@ class Tracker:
         self.detect(img)
         self.gap = 0
 
+    def resume(self, img: U8, T_cam_world: F64) -> None:
+        """Tracking resumes at ``img`` with pose ``T_cam_world`` (relocalised); the velocity of
+        before the loss is kept as the motion prior."""
+        self.prev_img = img
+        self.motion.T_last = T_cam_world.copy()
+        self.gap = 0
+
     def adopt_map_pose(self, T_cam_world: F64, velocity: F64) -> None:
         """A new map fixed the pose of the current image and the velocity."""
         self.motion.velocity = velocity

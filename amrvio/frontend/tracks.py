@@ -58,6 +58,17 @@ class TrackSet:
         self.first_kf = np.concatenate([self.first_kf, np.full(n, kf_id)])
         self.first_uv = np.vstack([self.first_uv, pts])
 
+    def reset(self, ids: I64, pts: F64) -> None:
+        """Replace every track by existing ones: (M,) increasing ``ids`` below ``next_id`` (e.g.
+        map points found again by relocalisation) at (M, 2) ``pts``, seen in no keyframe yet."""
+        ids = np.asarray(ids, dtype=np.int64)
+        if pts.shape != (len(ids), 2) or (len(ids) and (np.any(np.diff(ids) <= 0)
+                                                        or ids[-1] >= self.next_id)):
+            raise ShapeError("TrackSet.reset: ids must be increasing and known, pts (M, 2)")
+        self.ids, self.pts = ids.copy(), np.asarray(pts, dtype=np.float64).copy()
+        self.first_kf = np.full(len(ids), UNANCHORED, dtype=np.int64)
+        self.first_uv = self.pts.copy()
+
     def anchor(self, kf_id: int, first_uv: F64) -> None:
         """All tracks were first seen in keyframe ``kf_id`` at (N, 2) ``first_uv``."""
         self.first_kf = np.full(len(self.ids), kf_id, dtype=np.int64)

@@ -184,8 +184,9 @@ def _score_essential(E: F64, x1: F64, x2: F64, inv_sigma2: float) -> tuple[float
 @dataclass(frozen=True, slots=True)
 class _Candidate:
     """One motion hypothesis: points ``good`` (inliers in front, small reprojection, enough
-    parallax), ``n_consistent``: inliers whose rays agree with it (ignoring parallax), and
-    ``n_support``: all matches in front of both views with a small reprojection error."""
+    parallax), ``n_consistent``: inliers whose rays agree with it, and ``n_support``: all matches
+    that agree with it (in front of both views with a small reprojection error, or too little
+    parallax to tell: a far point noisy enough to land behind must not decide)."""
 
     T21: F64
     tri: TriangulationResult
@@ -205,7 +206,7 @@ def _check_motion(R: F64, t: F64, x1: F64, x2: F64, inl: B, cfg: TwoViewConfig,
     low = tri.parallax_deg < cfg.min_point_parallax_deg
     small = tri.reproj_err <= cfg.max_reproj_px
     consistent = inl & ((tri.in_front & small) | low)
-    support = tri.in_front & small
+    support = (tri.in_front & small) | low
     return _Candidate(T21, tri, good, int(good.sum()), int(consistent.sum()), int(support.sum()))
 
 

@@ -29,6 +29,7 @@ from amrvio.frontend.keyframe_policy import KeyframeReason
 from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, TrackOutcome
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
 from amrvio.pipeline.records import EstimatorReport, FrameRecord, PoseStatus
+from amrvio.pipeline.recovery import MapRecovery
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import Sim3, se3_matrix_inverse
 from amrvio.types.sensors import ImuData
@@ -91,6 +92,7 @@ class Pipeline:
         self.initializer = Initializer(K, cfg.init, cfg.seed)
         self.mapping = LocalMapping(K, cfg.mapping)
         self.scale = CameraHeightScale(cfg.scale, cfg.seed)
+        self.recovery = MapRecovery(K, cfg.recovery, cfg.seed)
         self.composer = TrajectoryComposer(K, RefineGates(
             cfg.output.final_refine, tracking.min_pnp_inliers, tracking.huber_px,
             tracking.pnp_thresh_px))
@@ -182,6 +184,12 @@ class Pipeline:
         T_hold = ref.T_cam_ref if ref.kind is AnchorKind.ABSOLUTE else np.eye(4)
         if blurred:
             return _Step(self._absolute(PoseStatus.LOST, T_hold), T_hold, report)
+        if self.recovery.target is not None:
+            lost_map = self.mapping.segments[self.recovery.target].mapper.map
+            reloc = self.recovery.attempt(img, lost_map)
+            if reloc is not None and reloc.ok and reloc.T_cam_world is not None:
+                return self._relocalised(index, img, reloc.T_cam_world, reloc.point_ids,
+                                         reloc.uv, report, events)
         res = self.initializer.attempt(index, self.tracker.tracks)
         if res.ok:
             return self._make_map(index, img, res, report, events)
@@ -215,6 +223,7 @@ class Pipeline:
             R_g, t_g = T_world_ref[:3, :3], T_world_ref[:3, 3]
             s_g = max(self.tracker.motion.typical_speed() * (index - ref), 1e-6)
             events.append(f"segment_scale_guess:{s_g:.4g}")
+        self.recovery.give_up()
         seg = self.mapping.new_segment(Sim3.from_srt(s_g, R_g, t_g))
         seg_id = len(self.mapping.segments) - 1
         tracks = self.tracker.tracks
@@ -241,7 +250,9 @@ class Pipeline:
         reading = self.scale.observe_keyframe(seg, new.kf1)
         if self.initializer.ref_img is not None:
             self.mapping.keep_image(new.kf0, self.initializer.ref_img)
+            self.recovery.add_keyframe(seg_id, new.kf0, self.initializer.ref_img, seg.mapper.map)
         self.mapping.seal_keyframe(new.kf1, img, tracks)
+        self.recovery.add_keyframe(seg_id, new.kf1, img, seg.mapper.map)
         events.append(f"init_ok:ref={ref}")
         kf = KeyframeReport(new.kf1, None, 0, None, None)
         report = dataclasses.replace(report, n_inliers=res.n_points)
@@ -262,6 +273,11 @@ class Pipeline:
                          step.T_cam_world, rep)
         if rep.outcome is TrackOutcome.LOST:
             events.append(f"lost:{rep.pnp_status}")
+            self.recovery.lost(len(self.mapping.segments) - 1)
+            reloc = self.recovery.attempt(img, seg.mapper.map)
+            if reloc is not None and reloc.ok and reloc.T_cam_world is not None:
+                return self._relocalised(index, img, reloc.T_cam_world, reloc.point_ids,
+                                         reloc.uv, rep, events)
             lost = self._start(index, img, events, keep_tracks=False)
             return dataclasses.replace(lost, tracking=dataclasses.replace(lost.tracking,
                                                                           outcome=TrackOutcome.LOST))
@@ -277,18 +293,36 @@ class Pipeline:
         if reason is KeyframeReason.NONE:
             return _Step(self._on_keyframe(step.T_cam_world, last_kf, step.observations),
                          step.T_cam_world, rep)
-        T_cw, kf = self.mapping.add_keyframe(index, step.T_cam_world, img, tracks, reason)
+        return self._keyframe(index, img, step.T_cam_world, reason, rep)
+
+    def _keyframe(self, index: int, img: U8, T_cam_world: F64, reason: KeyframeReason,
+                  rep: TrackingReport) -> _Step:
+        seg = self.mapping.current
+        tracks = self.tracker.tracks
+        T_cw, kf = self.mapping.add_keyframe(index, T_cam_world, img, tracks, reason)
         self.tracker.motion.T_last = T_cw
         self.tracker.detect(img, kf.kf_id)
         self.mapping.seal_keyframe(kf.kf_id, img, tracks)
+        self.recovery.add_keyframe(len(self.mapping.segments) - 1, kf.kf_id, img, seg.mapper.map)
         reading = self.scale.observe_keyframe(seg, kf.kf_id)
         return _Step(self._on_keyframe(T_cw, kf.kf_id, None), T_cw, rep, None, kf, reading)
+
+    def _relocalised(self, index: int, img: U8, T_cam_world: F64, ids: NDArray[np.int64],
+                     uv: F64, rep: TrackingReport, events: list[str]) -> _Step:
+        """Found again in the lost map: the tracks restart on the map points that matched, and
+        the frame becomes a keyframe of the same segment (one map, one scale)."""
+        self.tracker.tracks.reset(ids, uv)
+        self.tracker.resume(img, T_cam_world)
+        self.initialised = True
+        events.append(f"relocalised:{len(ids)}")
+        rep = dataclasses.replace(rep, outcome=TrackOutcome.TRACKED, n_inliers=len(ids))
+        return self._keyframe(index, img, T_cam_world, KeyframeReason.RELOCALISED, rep)
 
     # ------------------------------------------------------------------ the end
     def all_timings(self) -> dict[str, float]:
         out = dict(self.timings)
         for part in (self.tracker.timings, self.initializer.timings, self.mapping.all_timings(),
-                     self.scale.timings):
+                     self.scale.timings, self.recovery.timings):
             for k, v in part.items():
                 out[k] = out.get(k, 0.0) + v
         return out
