@@ -115,8 +115,9 @@ def read_imu_csv(path: Path) -> ImuData:
 
 
 def warn_missing_images(path: Path, n_missing: int, n_rows: int) -> None:
-    """One warning that counts the rows skipped because their image file is missing."""
-    if n_missing:
+    """One warning that counts the rows skipped because their image file is missing (none when
+    every row misses its image: the reader's error then says so, in one line)."""
+    if n_missing and n_missing < n_rows:
         log.warning(
             "%s: skipped %d of %d rows whose image file is missing", path, n_missing, n_rows
         )

@@ -102,8 +102,11 @@ def _header_line(table: TextTable) -> int:
 def _resolve_image(csv_dir: Path, name: str) -> Path | None:
     for base in (csv_dir, csv_dir / "images", csv_dir / "data"):
         candidate = base / name
-        if candidate.is_file():
-            return candidate
+        try:
+            if candidate.is_file():
+                return candidate
+        except OSError:  # a name too long for the file system
+            return None
     return None
 
 

@@ -179,7 +179,7 @@ TRAJECTORY_COMMENT = ("# amrvio {name}: T_world_cam, the camera pose in the worl
 def pose_rows(stamps_s: NDArray[np.float64], T_world_cam: NDArray[np.float64],
               keep: Sequence[bool]) -> tuple[NDArray[np.int64], Trajectory]:
     """The frames to write (``keep`` and a finite pose) and their trajectory."""
-    finite = np.all(np.isfinite(T_world_cam.reshape(len(T_world_cam), -1)), axis=1)
+    finite = np.all(np.isfinite(T_world_cam.reshape(-1, 16)), axis=1)
     idx = np.flatnonzero(np.asarray(keep, dtype=bool) & finite).astype(np.int64)
     return idx, Trajectory.from_matrices(stamps_s[idx], T_world_cam[idx])
 

@@ -293,8 +293,11 @@ def _replay_sources(config: SimConfig, rngs: list[np.random.Generator]) -> _Sour
 
     gt_path = Path(str(config.trajectory))
     ns, p, q, bg, ba = load_groundtruth(gt_path)
-    motion = make_replay_motion(ns, p, q, config.replay_start_s, config.seconds,
-                                config.replay_smoothing, bg, ba)
+    try:
+        motion = make_replay_motion(ns, p, q, config.replay_start_s, config.seconds,
+                                    config.replay_smoothing, bg, ba)
+    except ConfigError as err:  # the message names no file: name the one it is about
+        raise ConfigError(f"--trajectory {gt_path}: {err}") from None
     # extrinsic: explicit file, else the source's cam0/sensor.yaml (EuRoC layout), else default
     T_body_cam = default_T_body_cam(config.camera_pitch_deg)
     ext = (Path(config.cam_extrinsic) if config.cam_extrinsic
