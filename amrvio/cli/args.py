@@ -10,12 +10,13 @@ from pathlib import Path
 from typing import Any
 
 
-def _number(text: str, kind: type[float] | type[int]) -> float:
+def _number(text: str, kind: type[float] | type[int], rng: str = "") -> float:
     try:
         return kind(text.strip())
     except ValueError:
         what = "an integer" if kind is int else "a number"
-        raise argparse.ArgumentTypeError(f"expected {what}, got {text[:40]!r}") from None
+        where = f" in {rng}" if rng else ""
+        raise argparse.ArgumentTypeError(f"expected {what}{where}, got {text[:40]!r}") from None
 
 
 def _fmt_bound(v: float) -> str:
@@ -36,7 +37,7 @@ def bounded(lo: float, hi: float, *, integer: bool = False,
     rng = interval(lo, hi, lo_open)
 
     def parse(text: str) -> float:
-        v = _number(text, int if integer else float)
+        v = _number(text, int if integer else float, rng)
         if not math.isfinite(v):
             raise argparse.ArgumentTypeError(f"must be a finite number in {rng}, got {text}")
         if v < lo or v > hi or (lo_open and v == lo):

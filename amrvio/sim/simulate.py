@@ -136,20 +136,20 @@ class SimConfig:
         if self.camera_model not in ("pinhole", "radtan"):
             raise ConfigError(f"camera model must be pinhole or radtan, got {self.camera_model!r}")
         if not (math.isfinite(self.exposure_ms) and self.exposure_ms > 0):
-            raise ConfigError(f"exposure must be > 0 ms, got {self.exposure_ms}")
+            raise ConfigError(f"--exposure-ms must be > 0, got {self.exposure_ms}")
         if self.exposure_ms * 1e-3 > 0.9 / self.fps:
             raise ConfigError(
-                f"exposure {self.exposure_ms} ms does not fit in the frame period "
+                f"--exposure-ms {self.exposure_ms:g} does not fit in the frame period "
                 f"{1e3 / self.fps:.2f} ms (max 90 %)"
             )
         if not (math.isfinite(self.analog_gain) and 0.0 < self.analog_gain <= 64.0):
-            raise ConfigError(f"analog gain must be in (0, 64], got {self.analog_gain}")
+            raise ConfigError(f"--gain must be in (0, 64], got {self.analog_gain}")
         if not (0.2 <= self.response_gamma <= 5.0):
-            raise ConfigError(f"response gamma must be in [0.2, 5], got {self.response_gamma}")
+            raise ConfigError(f"--response-gamma must be in [0.2, 5], got {self.response_gamma}")
         if not (-1.0 < self.vignette_v1 <= 0.0):
-            raise ConfigError(f"vignette v1 must be in (-1, 0], got {self.vignette_v1}")
+            raise ConfigError(f"--vignette-v1 must be in (-1, 0], got {self.vignette_v1}")
         if self.replay_smoothing < 0:
-            raise ConfigError(f"replay smoothing must be >= 0, got {self.replay_smoothing}")
+            raise ConfigError(f"--replay-smoothing must be >= 0, got {self.replay_smoothing}")
         if self.ev_steps and self.auto_exposure:
             raise ConfigError("use either --ev-steps or --auto-exposure, not both")
         if not (math.isfinite(self.imu_rate_hz) and math.isfinite(self.wheel_rate_hz)

@@ -40,7 +40,7 @@ class Outcome:
     err: str
 
 
-def cli(argv: Sequence[str], capsys: pytest.CaptureFixture[str]) -> Outcome:
+def cli(argv: Sequence[str | Path], capsys: pytest.CaptureFixture[str]) -> Outcome:
     """``amrvio ARGV`` in-process; its exit code, stdout and stderr."""
     capsys.readouterr()
     rc = main([str(a) for a in argv])
