@@ -330,8 +330,10 @@ def read_euroc_csv(path: str | Path) -> EurocGroundTruth:
     for i, toks in enumerate(rows.tokens):
         tok = toks[0]
         try:
+            if "_" in tok:
+                raise ValueError(tok)
             stamps_ns[i] = int(tok)
-        except ValueError:
+        except (ValueError, OverflowError):
             raise TrajectoryFormatError(
                 p,
                 f"column 1: timestamp {tok[:40]!r} is not an integer number of nanoseconds",

@@ -123,9 +123,11 @@ def diagnose(dataset: Dataset, config: PipelineConfig | None = None, *,
     return out.records, setup
 
 
-def write_health(path: Path, records: Sequence[FrameRecord]) -> None:
+def write_health(path: Path, records: Sequence[FrameRecord],
+                 online_status: Sequence[PoseStatus] | None = None) -> None:
     """health.csv: one row per frame, the diagnostics columns (when computed) then the tracking
-    columns (when tracked)."""
+    columns (when tracked). ``online_status``: each frame's status when it was processed (the
+    online position is left empty for a frame LOST then; default: the final status)."""
     healths = [r.diagnostics for r in records if r.diagnostics is not None]
     tracked = any(r.tracking is not None for r in records)
     cols: list[str] = []
@@ -138,8 +140,9 @@ def write_health(path: Path, records: Sequence[FrameRecord]) -> None:
     if tracked:
         extra = FRAME_COLUMNS if not cols else FRAME_COLUMNS[2:]
         cols += extra
-        for row, r in zip(rows, records, strict=True):
-            row.update(zip(FRAME_COLUMNS, frame_row(r), strict=True))
+        for i, (row, r) in enumerate(zip(rows, records, strict=True)):
+            on = online_status[i] if online_status is not None else None
+            row.update(zip(FRAME_COLUMNS, frame_row(r, on), strict=True))
     with path.open("w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
         w.writeheader()
@@ -156,11 +159,13 @@ def _num(v: float, fmt: str) -> str:
     return format(v, fmt) if math.isfinite(v) else ""
 
 
-def frame_row(r: FrameRecord) -> list[str]:
+def frame_row(r: FrameRecord, online_status: PoseStatus | None = None) -> list[str]:
     """The tracking columns (``FRAME_COLUMNS``) of a record; the online position is empty for a
-    frame without an online pose, and for a LOST one (its pose is a placeholder)."""
+    frame without an online pose, and for one LOST when processed (``online_status``, default
+    the record's status): its pose then is a placeholder."""
     tr = r.tracking
-    has_pose = r.pose_online is not None and r.status is not PoseStatus.LOST
+    status_then = online_status if online_status is not None else r.status
+    has_pose = r.pose_online is not None and status_then is not PoseStatus.LOST
     on = r.pose_online.t if r.pose_online is not None and has_pose else np.full(3, np.nan)
     return [str(r.index), f"{r.t_ns * 1e-9:.9f}", r.status.value,
             "" if r.segment is None else str(r.segment), str(int(r.is_keyframe)),
@@ -222,7 +227,7 @@ def write_outputs(out: PipelineOutput, out_dir: Path, config: PipelineConfig | N
     with replacing(out_dir / "map.ply") as tmp:
         _write_ply(tmp, out.map_points)
     with replacing(out_dir / "health.csv") as tmp:
-        write_health(tmp, records)
+        write_health(tmp, records, online_status)
     with replacing(out_dir / "advice.txt") as tmp:
         write_advice(tmp, records, config or PipelineConfig(), notes)
     with replacing(out_dir / "scale_drift.csv") as tmp:

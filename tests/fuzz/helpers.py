@@ -128,7 +128,9 @@ def check_run_dir(out: Path, n_frames: int | None = None, n_skipped: int | None 
         assert summary["n_skipped"] == n_skipped == len(summary["skipped_frames"])
     traj = check_tum(out / "trajectory.tum")
     kfs = check_tum(out / "keyframes.tum")
-    check_tum(out / "trajectory_online.tum")
+    online = check_tum(out / "trajectory_online.tum")
+    with_online = [r for r in rows if r["online_x"] != ""]
+    np.testing.assert_allclose(online[:, 0], [float(r["t_s"]) for r in with_online], atol=1e-6)
     # LOST frames are left out of the trajectory; the others are there, at their stamps
     kept = [r for r in rows if r["status"] != "lost"]
     assert traj.shape[0] == len(kept) == summary["n_in_trajectory"]
