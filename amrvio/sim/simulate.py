@@ -143,7 +143,7 @@ class SimConfig:
                 f"{1e3 / self.fps:.2f} ms (max 90 %)"
             )
         if not (math.isfinite(self.analog_gain) and 0.0 < self.analog_gain <= 64.0):
-            raise ConfigError(f"--gain must be in (0, 64], got {self.analog_gain}")
+            raise ConfigError(f"--gain (analog gain) must be in (0, 64], got {self.analog_gain}")
         if not (0.2 <= self.response_gamma <= 5.0):
             raise ConfigError(f"--response-gamma must be in [0.2, 5], got {self.response_gamma}")
         if not (-1.0 < self.vignette_v1 <= 0.0):
