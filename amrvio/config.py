@@ -209,6 +209,23 @@ def _is_config(tp: Any) -> bool:
     return isinstance(tp, type) and dataclasses.is_dataclass(tp)
 
 
+# Ranges of the keys whose meaning fixes one (the command-line options state the same ranges);
+# every other number is held to +-MAX_ABS_NUMBER: a larger one is a typo, and it would overflow.
+KEY_BOUNDS: dict[str, tuple[float, float]] = {
+    "seed": (0, 2**32 - 1),
+    "scale.camera_height_m": (0.01, 100.0),
+}
+MAX_ABS_NUMBER = 1e9
+
+
+def _in_bounds(key: str, value: float, where: str) -> float:
+    lo, hi = KEY_BOUNDS.get(key, (-MAX_ABS_NUMBER, MAX_ABS_NUMBER))
+    if not lo <= value <= hi:
+        rng = ", ".join(str(int(b)) if float(b).is_integer() else f"{b:g}" for b in (lo, hi))
+        raise ConfigError(f"{where}: key '{key}' must be in [{rng}], got {value!r}")
+    return value
+
+
 def _check_value(key: str, tp: Any, value: Any, where: str) -> Any:
     """``value`` converted to ``tp`` or a ConfigError naming the key."""
     origin = typing.get_origin(tp)
@@ -232,13 +249,13 @@ def _check_value(key: str, tp: Any, value: Any, where: str) -> Any:
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{where}: key '{key}' must be an integer, got {value!r}")
-        return value
+        return _in_bounds(key, value, where)
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ConfigError(f"{where}: key '{key}' must be a number, got {value!r}")
         if value != value or value in (float("inf"), float("-inf")):
             raise ConfigError(f"{where}: key '{key}' must be finite, got {value!r}")
-        return float(value)
+        return float(_in_bounds(key, value, where))
     if tp is str:
         if not isinstance(value, str):
             raise ConfigError(f"{where}: key '{key}' must be a string, got {value!r}")
@@ -286,6 +303,8 @@ def load_config(path: Path) -> PipelineConfig:
         text = path.read_text(encoding="utf-8")
     except OSError as err:
         raise ConfigError(f"{path}: cannot read the config file ({err.strerror})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not a UTF-8 text file (a YAML config is text)") from None
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:

@@ -95,12 +95,13 @@ def test_check_images_reports_a_frame_of_another_size(tmp_path: Path) -> None:
     _write_png(odd, np.zeros((H, W + 4), dtype=np.uint8))
     ds = open_dataset(root)
     seen: list[int] = []
-    with pytest.raises(Exception, match=f"{W + 4}x{H} but .* is {W}x{H}") as info:
-        check_images(ds, seen.append)
-    assert str(info.value).startswith(f"{odd}:")
-    assert seen == [0, 1, 2]
+    checked = check_images(ds, seen.append)
+    assert seen == [0, 1, 2, 3] and checked.n_checked == 4 and checked.n_usable == 3
+    (bad,) = checked.skipped
+    assert bad.index == 3 and bad.file == str(odd)
+    assert bad.problem == f"image is {W + 4}x{H} but the recording's images are {W}x{H}"
     _write_png(odd, _image(3))
-    assert check_images(ds) == 4
+    assert check_images(ds).skipped == ()
 
 
 # Every bad input the issue lists, each as one broken copy of a small EuRoC recording:
@@ -146,7 +147,8 @@ def test_info_subprocess_bad_input_is_one_line(
     brk(root)
     proc = _amrvio("info", f"euroc:{root}", "--check-images")
     assert proc.returncode == 1, proc.stdout + proc.stderr
-    assert proc.stdout == ""
+    # a file the reader needs stops it before any output; an unusable image is listed (stdout)
+    assert (proc.stdout == "") == (named is not _bad_image), proc.stdout
     lines = proc.stderr.splitlines()
     assert len(lines) == 1, proc.stderr
     where = f"{named(root)}:{line}:" if line is not None else f"{named(root)}:"
@@ -277,5 +279,9 @@ def test_info_subprocess_broken_image_prints_no_native_noise(tmp_path: Path, suf
     assert _amrvio("info", f"folder:{root}").returncode == 0  # only the first image is decoded
     proc = _amrvio("info", f"folder:{root}", "--check-images")
     assert proc.returncode == 1
+    problem = ("truncated JPEG: the file ends before the image data" if suffix == ".jpg"
+               else "incomplete PNG: no IEND chunk (the file was cut short or is corrupt)")
     assert proc.stderr.splitlines() == [
-        f"amrvio info: error: {root / f'f1{suffix}'}: image cannot be decoded"], proc.stderr
+        f"amrvio info: error: {root / f'f1{suffix}'}: {problem} (1 of 3 images unusable; "
+        "listed above)"], proc.stderr
+    assert f"frame 1: {root / f'f1{suffix}'}: {problem}" in proc.stdout

@@ -48,19 +48,20 @@ def test_records_trajectory_and_summary_agree(runs: tuple[Path, Path, Path]) -> 
     kfs = np.loadtxt(out / "keyframes.tum", ndmin=2)
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     n = len(ds.frames)
-    assert len(rows) == n == summary["n_frames"] == traj.shape[0]
-    assert traj.shape[1] == 8
-    # same frames, same stamps, in order
+    assert len(rows) == n == summary["n_frames"]
+    # the trajectory: every frame not LOST, at its stamp, in order (a LOST frame has no pose)
+    posed = [r for r in rows if r["status"] != "lost"]
+    assert traj.shape == (len(posed), 8) and summary["n_in_trajectory"] == len(posed)
     assert [int(r["frame"]) for r in rows] == list(range(n))
     stamps = np.array([f.t_ns for f in ds.frames]) * 1e-9
-    np.testing.assert_allclose(traj[:, 0], stamps, atol=1e-9)
+    np.testing.assert_allclose([float(r["t_s"]) for r in posed], traj[:, 0], atol=1e-9)
     np.testing.assert_allclose([float(r["t_s"]) for r in rows], stamps, atol=1e-9)
     # status counts and keyframes
     counts: dict[str, int] = {}
     for r in rows:
         counts[r["status"]] = counts.get(r["status"], 0) + 1
     assert {k: v for k, v in summary["status_counts"].items() if v} == counts
-    is_kf = [r["is_keyframe"] == "1" for r in rows]
+    is_kf = [r["is_keyframe"] == "1" for r in posed]
     assert sum(is_kf) == summary["n_keyframes"] == kfs.shape[0]
     np.testing.assert_allclose(kfs[:, 0], traj[np.array(is_kf), 0])
     np.testing.assert_allclose(kfs[:, 1:], traj[np.array(is_kf), 1:])
@@ -69,10 +70,12 @@ def test_records_trajectory_and_summary_agree(runs: tuple[Path, Path, Path]) -> 
     assert ev == summary["events"]
     # the blackout is visible: some frames were not tracked on their own
     assert any(r["tracking"] not in ("tracked", "init_tracked", "started") for r in rows)
-    # the online (causal) trajectory: the same frames; it agrees with the refined one in the mean
+    # the online (causal) trajectory: the frames with an online pose (health.csv's online
+    # position), at the same stamps and positions
     online = np.loadtxt(out / "trajectory_online.tum", ndmin=2)
-    np.testing.assert_allclose(online[:, 0], traj[:, 0])
-    np.testing.assert_allclose([float(r["online_x"]) for r in rows], online[:, 1], atol=2e-6)
+    with_online = [r for r in rows if r["online_x"] != ""]
+    np.testing.assert_allclose(online[:, 0], [float(r["t_s"]) for r in with_online], atol=1e-9)
+    np.testing.assert_allclose([float(r["online_x"]) for r in with_online], online[:, 1], atol=2e-6)
     # quaternions are unit
     np.testing.assert_allclose(np.linalg.norm(traj[:, 4:], axis=1), 1.0, atol=1e-6)
     # the configuration used is recorded
@@ -83,8 +86,6 @@ def test_same_input_same_outputs(runs: tuple[Path, Path, Path]) -> None:
     _, a, b = runs
     for name in ("trajectory.tum", "trajectory_online.tum", "keyframes.tum", "health.csv", "advice.txt", "map.ply", "scale_drift.csv"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
-    sa = json.loads((a / "summary.json").read_text(encoding="utf-8"))
-    sb = json.loads((b / "summary.json").read_text(encoding="utf-8"))
-    sa.pop("timings_s")
-    sb.pop("timings_s")
-    assert sa == sb
+    # summary.json has no wall-clock figure (those are in timings.json): byte-identical
+    assert (a / "summary.json").read_bytes() == (b / "summary.json").read_bytes()
+    assert "timings_s" in json.loads((a / "timings.json").read_text(encoding="utf-8"))

@@ -5,33 +5,59 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from amrvio.cli.args import MAX_FRAMES, bounded, interval, max_frames_int
+
 NAME = "diagnose"
 HELP = "per-frame health (blur, gyro smear, exposure change, parallax, excitation) + advice"
 
 
+EXPOSURE_MS = (0.0, 1000.0)
+SMEAR_PX = (0.0, 1000.0)
+EV_STEP = (0.0, 20.0)
+GYRO_BIAS_RAD_S = 10.0
+PHOTOMETRIC_FRAMES = (2, 1000)
+DIAGNOSE_OUTPUTS = ("health.csv", "advice.txt", "health.png", "photometric_estimate")
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("dataset", help="dataset spec (euroc:PATH, kitti:PATH, ... or a bare PATH)")
-    parser.add_argument("--out", type=Path, required=True, help="output folder")
+    parser.add_argument("--out", type=Path, required=True,
+                        help="output folder: created if missing, checked before any work; a "
+                             "non-empty one needs --force")
+    parser.add_argument("--force", action="store_true",
+                        help="write into a non-empty --out (the files of an earlier diagnose are "
+                             "removed first; other files are left alone)")
     parser.add_argument("--calib", type=Path, default=None, metavar="FILE",
                         help="calibration file that overrides the dataset's own")
     parser.add_argument("--config", type=Path, default=None, metavar="FILE.yaml",
                         help="pipeline configuration (its diagnostics section; the options below "
                              "override it)")
-    parser.add_argument("--max-frames", type=int, default=None, help="stop after N frames")
-    parser.add_argument("--assumed-exposure-ms", type=float, default=None,
-                        help="exposure used for the smear prediction when frames carry none "
-                        "(default: half the frame period, at most 10 ms)")
-    parser.add_argument("--smear-bound-px", type=float, default=2.0,
-                        help="smear bound of the exposure advice (default 2 px)")
-    parser.add_argument("--ev-step", type=float, default=0.3,
-                        help="|EV| that flags an exposure step (default 0.3)")
+    parser.add_argument("--max-frames", type=max_frames_int, default=None, metavar="N",
+                        help=f"stop after N frames (N in {interval(1, MAX_FRAMES)})")
+    parser.add_argument("--assumed-exposure-ms", type=bounded(*EXPOSURE_MS, lo_open=True),
+                        default=None, metavar="MS",
+                        help="exposure used for the smear prediction when frames carry none, in "
+                             f"{interval(*EXPOSURE_MS, lo_open=True)} (default: half the frame "
+                             "period, at most 10 ms)")
+    parser.add_argument("--smear-bound-px", type=bounded(*SMEAR_PX, lo_open=True), default=2.0,
+                        metavar="PX",
+                        help="smear bound of the exposure advice, in "
+                             f"{interval(*SMEAR_PX, lo_open=True)} (default 2 px)")
+    parser.add_argument("--ev-step", type=bounded(*EV_STEP, lo_open=True), default=0.3,
+                        metavar="EV",
+                        help="|EV| that flags an exposure step, in "
+                             f"{interval(*EV_STEP, lo_open=True)} (default 0.3)")
     parser.add_argument("--gyro-bias", default="auto",
                         help="'auto' (mean gyro of a still first second, if still), 'none', "
-                        "or 'x,y,z' in rad/s")
+                        f"or 'x,y,z' in rad/s (each in [-{GYRO_BIAS_RAD_S:g}, "
+                        f"{GYRO_BIAS_RAD_S:g}])")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    parser.add_argument("--estimate-photometric", type=int, default=0, metavar="N",
+    parser.add_argument("--estimate-photometric", type=bounded(0, PHOTOMETRIC_FRAMES[1],
+                                                               integer=True),
+                        default=0, metavar="N",
                         help="also estimate response, vignette and exposures from N frames spread "
-                        "over the sequence (writes photometric_estimate/)")
+                        f"over the sequence, N in {interval(*PHOTOMETRIC_FRAMES)} (0: off; writes "
+                        "photometric_estimate/)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,41 +65,51 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from amrvio.cli.interrupt import StopRequest
     from amrvio.config import PipelineConfig, load_config
     from amrvio.errors import ConfigError
     from amrvio.io.dataset import open_dataset
-    from amrvio.pipeline.run import diagnose, write_advice, write_health
+    from amrvio.io.outdir import prepare_output_dir
+    from amrvio.pipeline.run import diagnose, replacing, write_advice, write_health
 
-    if not args.ev_step > 0 or not args.smear_bound_px > 0:
-        raise ConfigError("--ev-step and --smear-bound-px must be > 0")
-    if args.max_frames is not None and args.max_frames < 1:
-        raise ConfigError(f"--max-frames must be >= 1, got {args.max_frames}")
-    if args.assumed_exposure_ms is not None and not args.assumed_exposure_ms > 0:
-        raise ConfigError(f"--assumed-exposure-ms must be > 0, got {args.assumed_exposure_ms}")
-    cfg = load_config(args.config) if args.config is not None else PipelineConfig()
-    dc = cfg.diagnostics
-    cfg = dataclasses.replace(cfg, diagnostics=dataclasses.replace(
-        dc, smear_bound_px=args.smear_bound_px,
-        exposure=dataclasses.replace(dc.exposure, ev_step=args.ev_step)))
-    ds = open_dataset(args.dataset, calib=args.calib)
-    if not ds.frames:
-        raise ConfigError(f"{args.dataset}: the dataset has no frames")
+    if args.estimate_photometric == 1:
+        raise ConfigError("--estimate-photometric needs at least "
+                          f"{PHOTOMETRIC_FRAMES[0]} frames (or 0: off), got 1")
     bias: str | np.ndarray = args.gyro_bias
     if args.gyro_bias not in ("auto", "none"):
         try:
             bias = np.array([float(v) for v in args.gyro_bias.split(",")])
         except ValueError:
             bias = np.zeros(0)
-        if bias.shape != (3,):
-            raise ConfigError(f"--gyro-bias must be auto, none or x,y,z; got {args.gyro_bias!r}")
-    recs, setup = diagnose(ds, cfg, gyro_bias=bias, assumed_ms=args.assumed_exposure_ms,
-                           max_frames=args.max_frames, progress=True)
+        if bias.shape != (3,) or not np.all(np.abs(bias) <= GYRO_BIAS_RAD_S):
+            raise ConfigError(f"--gyro-bias must be auto, none or x,y,z with each in "
+                              f"[-{GYRO_BIAS_RAD_S:g}, {GYRO_BIAS_RAD_S:g}] rad/s; got "
+                              f"{args.gyro_bias[:60]!r}")
+    cfg = load_config(args.config) if args.config is not None else PipelineConfig()
+    dc = cfg.diagnostics
+    cfg = dataclasses.replace(cfg, diagnostics=dataclasses.replace(
+        dc, smear_bound_px=args.smear_bound_px,
+        exposure=dataclasses.replace(dc.exposure, ev_step=args.ev_step)))
+    out: Path = args.out
+    prepare_output_dir(out, args.force, DIAGNOSE_OUTPUTS)
+    ds = open_dataset(args.dataset, calib=args.calib)
+    if not ds.frames:
+        raise ConfigError(f"{args.dataset}: the dataset has no frames")
+    with StopRequest() as stop:
+        recs, setup = diagnose(ds, cfg, gyro_bias=bias, assumed_ms=args.assumed_exposure_ms,
+                               max_frames=args.max_frames, progress=True, stop=stop)
+    with replacing(out / "health.csv") as tmp:
+        write_health(tmp, recs)
+    with replacing(out / "advice.txt") as tmp:
+        write_advice(tmp, recs, cfg, setup.notes)
+    if stop.requested:
+        import sys
+
+        print(f"amrvio diagnose: interrupted after {len(recs)} frames; wrote their rows to "
+              f"{out / 'health.csv'}", file=sys.stderr)
+        return 130
     records = [r.diagnostics for r in recs if r.diagnostics is not None]
     frames = ds.frames if args.max_frames is None else ds.frames[: args.max_frames]
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    write_health(out / "health.csv", recs)
-    write_advice(out / "advice.txt", recs, cfg, setup.notes)
     if not args.no_plots:
         from amrvio.report.diagnostics_plots import plot_health
 
@@ -111,7 +147,7 @@ def _estimate_photometric(ds: object, frames: object, n: int, out: Path, plots: 
     d.mkdir(parents=True, exist_ok=True)
     lines = [f"frames used: {len(images)}; exposures {'known' if known else 'estimated'}",
              f"status: {est.status.value}; observations {est.n_observations}; "
-             f"rms {est.rms_dn:.2f} DN",
+             f"rms {est.rms_dn:.2f} DN" if np.isfinite(est.rms_dn) else "rms n/a",
              f"response: gamma {est.response.gamma:.4f}, coefficients "
              + " ".join(f"{c:.4f}" for c in est.response.coeffs),
              f"vignette: v1 {est.vignette.v1:.4f} v2 {est.vignette.v2:.4f} v3 {est.vignette.v3:.4f}"]

@@ -6,7 +6,11 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from amrvio.cli.args import non_negative_float, positive_float, positive_int
+from amrvio.cli.args import MAX_FRAMES, bounded, interval
+
+DELTA = (0.0, 1e6)
+MAX_DIFF_S = (0.0, 3600.0)
+DRIFT_WINDOW_M = (0.0, 1e7)
 
 NAME = "eval"
 HELP = "compare an estimated trajectory with ground truth (ATE, RPE, Sim3 scale, scale drift)"
@@ -22,7 +26,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="alignment of the estimate before the errors (default: sim3, Umeyama with scale)",
     )
     parser.add_argument(
-        "--delta", type=positive_float, default=1.0, help="RPE pair distance (default: 1)"
+        "--delta", type=bounded(*DELTA, lo_open=True), default=1.0,
+        help=f"RPE pair distance, in {interval(*DELTA, lo_open=True)} (default: 1)"
     )
     parser.add_argument(
         "--delta-unit",
@@ -37,24 +42,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--max-diff",
-        type=non_negative_float,
+        type=bounded(*MAX_DIFF_S),
         default=0.01,
         metavar="S",
-        help="largest stamp difference (s) to associate two poses (default: 0.01)",
+        help=f"largest stamp difference (s) to associate two poses, in {interval(*MAX_DIFF_S)} "
+        "(default: 0.01)",
     )
     parser.add_argument(
         "--n-align",
-        type=positive_int,
+        type=bounded(1, MAX_FRAMES, integer=True),
         default=None,
         metavar="N",
-        help="align on the first N associated poses only (default: all)",
+        help=f"align on the first N associated poses only, N in {interval(1, MAX_FRAMES)} "
+        "(default: all)",
     )
     parser.add_argument(
         "--drift-window",
-        type=positive_float,
+        type=bounded(*DRIFT_WINDOW_M, lo_open=True),
         default=None,
         metavar="M",
-        help="scale-drift window length in metres of ground-truth path (default: 10%% of it)",
+        help="scale-drift window length in metres of ground-truth path, in "
+        f"{interval(*DRIFT_WINDOW_M, lo_open=True)} (default: 10%% of it)",
     )
     parser.add_argument("--gt-times", type=Path, default=None, help="times file for a KITTI GT")
     parser.add_argument("--est-times", type=Path, default=None, help="times file for a KITTI EST")
@@ -101,11 +109,13 @@ def format_table(summary: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from amrvio.cli.args import write_json
+    from amrvio.cli.args import check_output_file, write_json
     from amrvio.errors import ConfigError
     from amrvio.eval import evaluate
     from amrvio.io.trajectory import read_trajectory
 
+    check_output_file(args.json, "--json")
+    check_output_file(args.plot, "--plot")
     est = read_trajectory(args.est, times=args.est_times)
     gt = read_trajectory(args.gt, times=args.gt_times)
     result = evaluate(

@@ -22,7 +22,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--image-topic", default=None, help="bag image topic (default: the only one)")
     parser.add_argument("--imu-topic", default=None, help="bag IMU topic (default: the only one)")
     parser.add_argument("--check-images", action="store_true",
-                        help="decode every image and check that all have the same size")
+                        help="decode every image as `run` does and list the ones it would "
+                             "skip (unreadable, truncated, another size); exit 1 if any")
     parser.add_argument("--json", type=Path, default=None, metavar="OUT", help="write the summary")
 
 
@@ -73,17 +74,25 @@ def format_summary(s: dict[str, Any]) -> str:
     ph = s["photometric"]
     present = [k for k in ("inverse_response", "vignette") if ph[k]]
     rows.append(("photometric files", ", ".join(present) if present else "none"))
-    if "images_checked" in s:
+    bad: list[dict[str, Any]] = s.get("images_unusable", [])
+    if "images_checked" in s and not bad:
         rows.append(("images checked", f"{s['images_checked']} decoded, all {fr['width']}x{fr['height']}"))
+    elif "images_checked" in s:
+        rows.append(("images checked", f"{s['images_checked'] - len(bad)} of {s['images_checked']}"
+                                       f" usable; {len(bad)} unusable (amrvio run skips them):"))
     width = max(len(k) for k, _ in rows)
-    return "\n".join(f"{k:<{width}}  {v}" for k, v in rows)
+    lines = [f"{k:<{width}}  {v}" for k, v in rows]
+    lines += [f"  frame {b['index']}: {b['file']}: {b['problem']}" for b in bad]
+    return "\n".join(lines)
 
 
 def run(args: argparse.Namespace) -> int:
-    from amrvio.cli.args import write_json
+    from amrvio.cli.args import check_output_file, write_json
+    from amrvio.errors import DatasetFormatError
     from amrvio.io.dataset import open_dataset
     from amrvio.io.info import check_images, dataset_summary
 
+    check_output_file(args.json, "--json")
     ds = open_dataset(args.dataset, args.calib, image_topic=args.image_topic, imu_topic=args.imu_topic)
     summary = dataset_summary(ds)
     if args.check_images:
@@ -91,8 +100,16 @@ def run(args: argparse.Namespace) -> int:
 
         with tqdm(total=len(ds.frames), desc="images", unit="frame", file=sys.stderr,
                   disable=not sys.stderr.isatty()) as bar:
-            summary["images_checked"] = check_images(ds, lambda _k: bar.update(1))
+            checked = check_images(ds, lambda _k: bar.update(1))
+        summary["images_checked"] = checked.n_checked
+        summary["images_unusable"] = [
+            {"index": b.index, "t_ns": b.t_ns, "file": b.file, "problem": b.problem}
+            for b in checked.skipped]
     print(format_summary(summary))
     if args.json is not None:
         write_json(args.json, summary)
+    if args.check_images and checked.skipped:
+        first = checked.skipped[0]
+        raise DatasetFormatError(first.file, f"{first.problem} ({len(checked.skipped)} of "
+                                             f"{checked.n_checked} images unusable; listed above)")
     return 0

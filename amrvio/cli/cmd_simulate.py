@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
+from typing import Any
+
+from amrvio.cli.args import bounded, interval
 
 NAME = "simulate"
 # amrvio.sim.simulate.SCENES and MOTIONS (kept here so that building the parser imports no
@@ -14,12 +18,35 @@ MOTION_CHOICES = ("forward-stop-turn", "constant-velocity", "rough-floor", "hand
 HELP = "simulate a camera + IMU + wheel-odometry sequence with ground truth (ASL/EuRoC layout)"
 
 
+# The ranges of amrvio.sim.simulate.SIM_BOUNDS, MAX_PIXELS (SimConfig checks them again; a test
+# keeps the two equal). Kept here so that `amrvio --help` does not import the simulator.
+OPTION_BOUNDS: dict[str, tuple[float, float]] = {
+    "seconds": (0.05, 3600.0),
+    "seed": (0, 2**32 - 1),
+    "imu_rate_hz": (1.0, 10_000.0),
+    "side_px": (16, 4096),
+    "replay_start_s": (0.0, 1e6),
+    "replay_smoothing": (0.0, 1e6),
+}
+MAX_PIXELS = 4096 * 3072
+
+
 def _resolution(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"resolution must be WxH, e.g. 752x480, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"resolution must be WxH, e.g. 752x480, got {text[:40]!r}") from None
+    lo, hi = OPTION_BOUNDS["side_px"]
+    if not (lo <= w <= hi and lo <= h <= hi) or w * h > MAX_PIXELS:
+        raise argparse.ArgumentTypeError(f"each side must be in [{lo:g}, {hi:g}] px and W x H at "
+                                         f"most {MAX_PIXELS} pixels, got {text[:40]}")
     return w, h
+
+
+def _in(key: str) -> tuple[Callable[[str], Any], str]:
+    """(argparse type, range text) of an OPTION_BOUNDS entry."""
+    lo, hi = OPTION_BOUNDS[key]
+    return bounded(lo, hi, integer=key == "seed"), interval(lo, hi)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -44,43 +71,64 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="replay: recorded IMU (EuRoC imu0 CSV) used instead of synthetic IMU")
     parser.add_argument("--cam-extrinsic", metavar="SENSOR_YAML",
                         help="replay: sensor.yaml whose T_BS is the camera pose in the IMU frame")
-    parser.add_argument("--replay-start", type=float, default=0.0, metavar="S",
-                        help="replay: seconds after the first ground-truth pose")
-    parser.add_argument("--replay-smoothing", type=float, default=0.0, metavar="LAM",
-                        help="replay: smoothing-spline penalty on positions (0 = interpolate)")
-    parser.add_argument("--seconds", type=float, default=10.0)
-    parser.add_argument("--seed", type=int, default=0)
+    start_t, start_r = _in("replay_start_s")
+    parser.add_argument("--replay-start", type=start_t, default=0.0, metavar="S",
+                        help=f"replay: seconds after the first ground-truth pose, in {start_r}")
+    smooth_t, smooth_r = _in("replay_smoothing")
+    parser.add_argument("--replay-smoothing", type=smooth_t, default=0.0, metavar="LAM",
+                        help="replay: smoothing-spline penalty on positions (0 = interpolate), "
+                             f"in {smooth_r}")
+    sec_t, sec_r = _in("seconds")
+    parser.add_argument("--seconds", type=sec_t, default=10.0,
+                        help=f"duration, in {sec_r} s (and at most 100000 frames)")
+    seed_t, seed_r = _in("seed")
+    parser.add_argument("--seed", type=seed_t, default=0, help=f"in {seed_r}")
     parser.add_argument("--imu-noise", choices=("on", "off"), default="on",
                         help="off: exact IMU samples and constant zero biases; imu0/sensor.yaml "
                         "still lists the nominal ADIS16448 densities (an estimator needs them) "
                         "and its comment says the data are exact")
-    parser.add_argument("--imu-rate", type=float, default=200.0, metavar="HZ")
+    rate_t, rate_r = _in("imu_rate_hz")
+    parser.add_argument("--imu-rate", type=rate_t, default=200.0, metavar="HZ",
+                        help=f"IMU rate, in {rate_r} Hz")
     parser.add_argument("--blur", choices=("on", "off"), default="on")
-    parser.add_argument("--exposure-ms", type=float, default=12.0)
-    parser.add_argument("--gain", type=float, default=1.0,
-                        help="analog gain applied to the collected signal before the response")
+    parser.add_argument("--exposure-ms", type=bounded(0.0, 1000.0, lo_open=True), default=12.0,
+                        help="exposure time, in (0, 1000] ms and at most 90 %% of the frame "
+                             "period")
+    parser.add_argument("--gain", type=bounded(0.0, 64.0, lo_open=True), default=1.0,
+                        help="analog gain applied to the collected signal before the response, "
+                             "in (0, 64]")
     parser.add_argument("--sensor-noise", choices=("on", "off"), default="on",
                         help="shot and read noise of the image sensor")
     parser.add_argument("--ev-steps", default="", metavar="T:EV,...",
-                        help='scripted exposure steps, e.g. "2:+1,5:-0.5" (EV = log2 exposure ratio)')
+                        help='scripted exposure steps, e.g. "2:+1,5:-0.5" (EV = log2 exposure '
+                             'ratio; T in [0, --seconds], |EV| <= 10)')
     parser.add_argument("--auto-exposure", action="store_true",
                         help="P-control of the mean intensity (rate-limited)")
-    parser.add_argument("--response-gamma", type=float, default=1.0,
-                        help="camera response G(x) ~ x^(1/gamma) with a linear toe; 1 = linear")
-    parser.add_argument("--vignette-v1", type=float, default=-0.25,
-                        help="radial vignetting V = 1 + v1 r^2 (r = 1 at the image corner)")
-    parser.add_argument("--fps", type=float, default=20.0)
-    parser.add_argument("--resolution", type=_resolution, default=(752, 480), metavar="WxH")
+    parser.add_argument("--response-gamma", type=bounded(0.2, 5.0), default=1.0,
+                        help="camera response G(x) ~ x^(1/gamma) with a linear toe; 1 = linear; "
+                             "in [0.2, 5]")
+    parser.add_argument("--vignette-v1", type=bounded(-1.0, 0.0, lo_open=True), default=-0.25,
+                        help="radial vignetting V = 1 + v1 r^2 (r = 1 at the image corner), "
+                             "in (-1, 0]")
+    parser.add_argument("--fps", type=bounded(0.0, 1000.0, lo_open=True), default=20.0,
+                        help="frame rate, in (0, 1000] Hz")
+    parser.add_argument("--resolution", type=_resolution, default=(752, 480), metavar="WxH",
+                        help="image size; each side in [16, 4096] px, at most 4096x3072 pixels")
     parser.add_argument("--camera-model", choices=("pinhole", "radtan"), default="pinhole")
     parser.add_argument("--blur-bursts", default="", metavar="T0:DUR:OMEGA,...",
-                        help="fast yaw oscillations (peak rad/s) added to the motion")
+                        help="fast yaw oscillations (peak rad/s) added to the motion; T0 in "
+                             "[0, --seconds], DUR in (0, --seconds], |OMEGA| <= 30 rad/s")
     parser.add_argument("--blackout", action="append", default=[], metavar="T0:DUR,...",
                         help="cover the lens over [T0, T0+DUR) seconds (repeatable or "
                         "comma-separated): frames exposed then are near-black (read noise only) "
                         "while the motion, IMU and wheel data go on; sim_config.yaml lists the dark "
                         "frames under derived.blackouts")
-    parser.add_argument("--wheel-slips", default="", metavar="T0:DUR:SLIP,...")
-    parser.add_argument("--out", required=True, metavar="DIR")
+    parser.add_argument("--wheel-slips", default="", metavar="T0:DUR:SLIP,...",
+                        help="wheel slip episodes; T0 in [0, --seconds], DUR in (0, --seconds], "
+                             "SLIP in [-1, 10]")
+    parser.add_argument("--out", required=True, metavar="DIR",
+                        help="output folder, checked before any work; a non-empty one needs "
+                             "--force")
     parser.add_argument("--force", action="store_true", help="overwrite a non-empty DIR")
 
 
@@ -119,6 +167,10 @@ def run(args: argparse.Namespace) -> int:
         replay_start_s=args.replay_start,
         replay_smoothing=args.replay_smoothing,
     )
+    from amrvio.io.outdir import prepare_output_dir
+    from amrvio.sim.simulate import SIM_OUTPUTS
+
+    prepare_output_dir(Path(args.out), args.force, SIM_OUTPUTS)
     bar = tqdm(total=0, unit="frame", desc="simulate", file=sys.stderr,
                disable=not sys.stderr.isatty())
 

@@ -16,6 +16,7 @@ import pkgutil
 import sys
 from collections.abc import Iterator, Sequence
 from types import ModuleType
+from typing import NoReturn
 
 from amrvio.errors import AmrvioError
 
@@ -29,8 +30,25 @@ def _command_modules() -> list[ModuleType]:
     return [importlib.import_module(f"amrvio.cli.{n}") for n in names]
 
 
+class UsageError(Exception):
+    """A command line argparse refuses: ``prog`` (``amrvio run``) and argparse's message."""
+
+    def __init__(self, prog: str, message: str) -> None:
+        super().__init__(message)
+        self.prog = prog
+        self.message = message
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line (no usage block) and exit code 1, like every
+    other amrvio error; ``--help`` shows the usage and the ranges."""
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(self.prog, message)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="amrvio",
         description="Robust monocular VO/VIO for mobile robots, with per-frame health records.",
     )
@@ -82,7 +100,12 @@ def one_line(text: str) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except UsageError as err:
+        print(f"{err.prog}: error: {one_line(err.message)} (see {err.prog} --help)",
+              file=sys.stderr)
+        return 1
     try:
         with native_stderr_silenced():
             rc: int = args._run(args)

@@ -138,6 +138,7 @@ class Tracker:
         self.motion = MotionModel()
         self.prev_img: U8 | None = None
         self.gap = 0  # frames since the last good (committed) image
+        self.mapped = False  # tracking against a map (else towards an initialisation reference)
         self.timings: dict[str, float] = {}
 
     def _toc(self, stage: str, t0: float) -> None:
@@ -162,6 +163,7 @@ class Tracker:
             self.tracks.clear()
         self.detect(img)
         self.gap = 0
+        self.mapped = False
 
     def resume(self, img: U8, T_cam_world: F64) -> None:
         """Tracking resumes at ``img`` with pose ``T_cam_world`` (relocalised); the velocity of
@@ -169,11 +171,13 @@ class Tracker:
         self.prev_img = img
         self.motion.T_last = T_cam_world.copy()
         self.gap = 0
+        self.mapped = True
 
     def adopt_map_pose(self, T_cam_world: F64, velocity: F64) -> None:
         """A new map fixed the pose of the current image and the velocity."""
         self.motion.velocity = velocity
         self.motion.T_last = T_cam_world.copy()
+        self.mapped = True
 
     def _report(self, outcome: TrackOutcome, res: KltResult | None, n_inl: int = 0,
                 prior: bool = False, pnp: str | None = None) -> TrackingReport:

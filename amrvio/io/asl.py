@@ -32,6 +32,7 @@ from amrvio.io.calib_load import (
     read_imu_noise_file,
     read_photometric,
 )
+from amrvio.io.image import ImageFile
 from amrvio.io.table import (
     TextTable,
     check_columns,
@@ -55,6 +56,17 @@ def find_mav0(path: Path) -> Path:
     raise DatasetFormatError(path, "not an ASL/EuRoC folder: neither mav0/ nor cam0/ found in it")
 
 
+MAX_NAME_CHARS = 4096
+"""Longest image name (a relative path) a data.csv row may give."""
+
+
+def _is_file(path: Path) -> bool:
+    try:
+        return path.is_file()
+    except OSError:  # a name too long for the file system, a loop of links
+        return False
+
+
 def read_asl_frames(cam_dir: Path) -> tuple[Frame, ...]:
     """Frames of ``cam_dir/data.csv`` (``t_ns, filename``); rows with a missing image are skipped."""
     csv_path = cam_dir / "data.csv"
@@ -67,14 +79,20 @@ def read_asl_frames(cam_dir: Path) -> tuple[Frame, ...]:
         present = set(os.listdir(image_dir))
     except FileNotFoundError:
         raise DatasetFormatError(image_dir, "image folder is missing") from None
+    except OSError as err:
+        raise DatasetFormatError(image_dir, f"cannot list the image folder: {err.strerror}") from None
     frames: list[Frame] = []
     missing = 0
-    for t_ns, row in zip(stamps.tolist(), table.rows, strict=True):
+    for t_ns, row, line in zip(stamps.tolist(), table.rows, table.lines, strict=True):
         name = row[1]
-        if name not in present and not (image_dir / name).is_file():
+        if len(name) > MAX_NAME_CHARS:
+            raise DatasetFormatError(csv_path, f"image name of {len(name)} characters (at most "
+                                               f"{MAX_NAME_CHARS})", line)
+        if name not in present and not _is_file(image_dir / name):
             missing += 1
             continue
-        frames.append(Frame(t_ns=int(t_ns), index=len(frames), path=image_dir / name))
+        image = image_dir / name
+        frames.append(Frame(t_ns=int(t_ns), index=len(frames), path=image, loader=ImageFile(image)))
     warn_missing_images(csv_path, missing, len(table))
     if not frames:
         raise DatasetFormatError(csv_path, "no camera rows with an existing image file")

@@ -17,9 +17,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import DatasetFormatError, InputFileError
+from amrvio.io.image import to_grey
 from amrvio.io.table import (
     check_columns,
     check_increasing,
+    check_magnitude,
     float_columns,
     int_column,
     read_table,
@@ -92,12 +94,20 @@ class Dataset:
             i += 1
 
 
+MAX_GYRO_RAD_S = 100.0
+"""Largest |angular rate| an IMU file may hold (rad/s; MEMS gyros saturate near 35)."""
+MAX_ACCEL_M_S2 = 2000.0
+"""Largest |acceleration| an IMU file may hold (m/s^2, about 200 g)."""
+
+
 def read_imu_csv(path: Path) -> ImuData:
     """EuRoC imu0 layout: ``t_ns, w_x, w_y, w_z [rad/s], a_x, a_y, a_z [m/s^2]``."""
     table = read_table(path, ",", "IMU file")
     check_columns(table, 7, "IMU row")
     stamps = int_column(table, 0, "IMU timestamp [ns]")
     values = float_columns(table, range(1, 7), "IMU value")
+    check_magnitude(table, values[:, 0:3], MAX_GYRO_RAD_S, "IMU angular rate [rad/s]")
+    check_magnitude(table, values[:, 3:6], MAX_ACCEL_M_S2, "IMU acceleration [m/s^2]")
     check_increasing(table, stamps, "IMU")
     if not len(table):
         raise DatasetFormatError(path, "IMU file has no data rows")
@@ -105,21 +115,86 @@ def read_imu_csv(path: Path) -> ImuData:
 
 
 def warn_missing_images(path: Path, n_missing: int, n_rows: int) -> None:
-    """One warning that counts the rows skipped because their image file is missing."""
-    if n_missing:
+    """One warning that counts the rows skipped because their image file is missing (none when
+    every row misses its image: the reader's error then says so, in one line)."""
+    if n_missing and n_missing < n_rows:
         log.warning(
             "%s: skipped %d of %d rows whose image file is missing", path, n_missing, n_rows
         )
 
 
+def frame_name(frame: Frame) -> str:
+    """The image file of ``frame``, or ``frame K (t=... ns)`` when it has none (bag, zip)."""
+    loader = frame.loader
+    if frame.path is not None:
+        return str(frame.path)
+    described = getattr(loader, "where", None)
+    if isinstance(described, str):
+        return described
+    return f"frame {frame.index} (t={frame.t_ns} ns)"
+
+
+MAX_LEADING_BAD_IMAGES = 10
+"""How many unusable images at the start of a recording the readers pass over to find its size."""
+
+
 def first_image_shape(frames: Sequence[Frame]) -> tuple[tuple[int, int], str]:
-    """(height, width) of the first frame and a name for it (reads that one image only)."""
+    """(height, width) of the first usable frame and a name for it.
+
+    An unusable first image (truncated, undecodable) is passed over as the pipeline passes over
+    it, up to :data:`MAX_LEADING_BAD_IMAGES`; after that, or when no image is usable, the first
+    one's error is raised.
+    """
     if not frames:
         raise DatasetFormatError("<dataset>", "the dataset has no frames")
-    first = frames[0]
-    img = first.load()
-    name = str(first.path) if first.path is not None else f"frame 0 (t={first.t_ns} ns)"
-    return (int(img.shape[0]), int(img.shape[1])), name
+    first_err: DatasetFormatError | None = None
+    for frame in frames[:MAX_LEADING_BAD_IMAGES + 1]:
+        try:
+            img = frame.load()
+        except DatasetFormatError as err:
+            first_err = first_err or err
+            continue
+        return (int(img.shape[0]), int(img.shape[1])), frame_name(frame)
+    if first_err is None:  # unreachable: the loop ran at least once
+        raise DatasetFormatError("<dataset>", "the dataset has no frames")
+    raise first_err
+
+
+@dataclass(frozen=True, slots=True)
+class SkippedFrame:
+    """A frame whose image cannot be used: ``index`` and ``t_ns`` in the dataset, ``file`` (the
+    image, or a description for a bag or zip member) and the ``problem``."""
+
+    index: int
+    t_ns: int
+    file: str
+    problem: str
+
+    def line(self) -> str:
+        """``FILE: problem`` (one line)."""
+        return f"{self.file}: {self.problem}"
+
+
+def load_checked(frame: Frame, size_hw: tuple[int, int] | None) -> U8 | SkippedFrame:
+    """The frame's (H, W) uint8 image, or why it cannot be used: it cannot be read or decoded
+    (see :mod:`amrvio.io.image`), or its (height, width) differs from ``size_hw`` (the size of
+    the recording's other images, which the calibration is for).
+
+    A differing size is a skip, not an error: one odd file in a recording (a frame written by
+    another tool, a thumbnail) must not cost the whole run, and the calibration cannot be used
+    on it, so the frame cannot be tracked. The skip is counted and names the file.
+    """
+    try:
+        img = frame.load()
+    except DatasetFormatError as err:
+        return SkippedFrame(frame.index, frame.t_ns, err.path, err.problem)
+    if size_hw is not None and (img.shape[0], img.shape[1]) != size_hw:
+        return SkippedFrame(
+            frame.index, frame.t_ns, frame_name(frame),
+            f"image is {img.shape[1]}x{img.shape[0]} but the recording's images are "
+            f"{size_hw[1]}x{size_hw[0]}",
+        )
+    return img
 
 
 def rethrow_as_dataset_error(err: InputFileError) -> DatasetFormatError:
@@ -128,14 +203,6 @@ def rethrow_as_dataset_error(err: InputFileError) -> DatasetFormatError:
 
 
 def to_grey_u8(img: NDArray[np.generic], where: str) -> U8:
-    """A decoded image (grey, BGR or BGRA; 8 or 16 bit) as (H, W) uint8 grey."""
-    import cv2
-
-    if img.ndim == 3:
-        code = cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY
-        img = cv2.cvtColor(img, code)
-    if img.dtype == np.uint16:
-        img = (img.astype(np.uint16) >> 8).astype(np.uint8)
-    if img.dtype != np.uint8 or img.ndim != 2:
-        raise DatasetFormatError(where, f"unsupported image format {img.dtype} {img.shape}")
-    return np.asarray(img, dtype=np.uint8)
+    """A decoded image (grey, BGR or BGRA; 8 or 16 bit) as (H, W) uint8 grey, checked
+    (:func:`amrvio.io.image.to_grey`)."""
+    return to_grey(img, where)

@@ -22,6 +22,7 @@ from amrvio.io.calib_load import (
     read_imu_noise_file,
     read_photometric,
 )
+from amrvio.io.image import ImageFile
 from amrvio.io.table import (
     TextTable,
     check_columns,
@@ -101,8 +102,11 @@ def _header_line(table: TextTable) -> int:
 def _resolve_image(csv_dir: Path, name: str) -> Path | None:
     for base in (csv_dir, csv_dir / "images", csv_dir / "data"):
         candidate = base / name
-        if candidate.is_file():
-            return candidate
+        try:
+            if candidate.is_file():
+                return candidate
+        except OSError:  # a name too long for the file system
+            return None
     return None
 
 
@@ -126,7 +130,7 @@ def read_folder(path: Path, calib: Path | None = None) -> Dataset:
         if image is None:
             missing += 1
             continue
-        frames.append(Frame(int(t_ns), len(frames), image))
+        frames.append(Frame(int(t_ns), len(frames), image, loader=ImageFile(image)))
     warn_missing_images(csv_path, missing, len(table))
     if not frames:
         raise DatasetFormatError(csv_path, "no row names an existing image file")

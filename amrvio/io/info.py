@@ -2,23 +2,22 @@
 
 :func:`dataset_summary` describes an opened :class:`~amrvio.io.base.Dataset` (frames, time span,
 frame rate, image size, camera, IMU, noise, ``T_body_cam``, ground truth, exposure and photometric
-files) as a JSON-ready dict. :func:`check_images` decodes every frame and checks that all have the
-size of the first one (the readers only decode the first image when opening).
+files) as a JSON-ready dict. :func:`check_images` decodes every frame and lists those that ``amrvio run``
+would skip (unreadable, truncated, or of another size; the readers decode only the first image).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from amrvio.errors import DatasetFormatError
-from amrvio.io.base import Dataset
+from amrvio.io.base import Dataset, SkippedFrame, first_image_shape, load_checked
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import SE3
-from amrvio.types.sensors import Frame
 
 
 def _median_rate_hz(stamps_ns: NDArray[np.int64]) -> float | None:
@@ -31,12 +30,6 @@ def _median_rate_hz(stamps_ns: NDArray[np.int64]) -> float | None:
 def _span(stamps_ns: NDArray[np.int64]) -> dict[str, Any]:
     first, last = int(stamps_ns[0]), int(stamps_ns[-1])
     return {"first_t_ns": first, "last_t_ns": last, "duration_s": (last - first) * 1e-9}
-
-
-def _frame_name(frame: Frame) -> str:
-    if frame.path is not None:
-        return str(frame.path)
-    return f"frame {frame.index} (t={frame.t_ns} ns)"
 
 
 def camera_summary(camera: CameraModel) -> dict[str, Any]:
@@ -76,8 +69,8 @@ def dataset_summary(ds: Dataset) -> dict[str, Any]:
     frames: dict[str, Any] = {"count": len(ds.frames), "rate_hz": _median_rate_hz(stamps)}
     if ds.frames:
         frames.update(_span(stamps))
-        first = ds.frames[0].load()
-        frames["width"], frames["height"] = int(first.shape[1]), int(first.shape[0])
+        (height, width), _ = first_image_shape(ds.frames)
+        frames["width"], frames["height"] = width, height
     imu: dict[str, Any] | None = None
     if ds.imu is not None and len(ds.imu):
         imu = {"samples": len(ds.imu), "rate_hz": _median_rate_hz(ds.imu.stamps_ns)}
@@ -121,23 +114,33 @@ def dataset_summary(ds: Dataset) -> dict[str, Any]:
     }
 
 
-def check_images(ds: Dataset, progress: Callable[[int], None] | None = None) -> int:
-    """Decode every frame; all must have the size of the first. Returns the number checked.
+@dataclass(frozen=True, slots=True)
+class ImageCheck:
+    """What :func:`check_images` found: frames decoded and the frames that cannot be used."""
 
-    Raises DatasetFormatError naming the first image that cannot be decoded or has another size.
+    n_checked: int
+    skipped: tuple[SkippedFrame, ...]
+
+    @property
+    def n_usable(self) -> int:
+        return self.n_checked - len(self.skipped)
+
+
+def check_images(ds: Dataset, progress: Callable[[int], None] | None = None) -> ImageCheck:
+    """Decode every frame as ``amrvio run`` would, and list those it would skip: images that
+    cannot be read or decoded, truncated ones, and any whose size differs from the recording's
+    (the first usable image's, which the calibration was checked against).
+
     ``progress(k)`` is called after frame k.
     """
-    size: tuple[int, ...] | None = None
+    size: tuple[int, int] | None = None
+    if ds.frames:
+        size = first_image_shape(ds.frames)[0]
+    skipped: list[SkippedFrame] = []
     for k, frame in enumerate(ds.frames):
-        shape = frame.load().shape
-        if size is None:
-            size = shape
-        elif shape != size:
-            raise DatasetFormatError(
-                _frame_name(frame),
-                f"image is {shape[1]}x{shape[0]} but {_frame_name(ds.frames[0])} is "
-                f"{size[1]}x{size[0]}; every frame of a recording must have the same size",
-            )
+        got = load_checked(frame, size)
+        if isinstance(got, SkippedFrame):
+            skipped.append(got)
         if progress is not None:
             progress(k)
-    return len(ds.frames)
+    return ImageCheck(len(ds.frames), tuple(skipped))

@@ -13,6 +13,7 @@ from pathlib import Path
 from amrvio.errors import DatasetFormatError, TrajectoryFormatError
 from amrvio.io.base import Dataset, first_image_shape, rethrow_as_dataset_error
 from amrvio.io.calib_load import load_checked_calibration
+from amrvio.io.image import ImageFile
 from amrvio.io.table import check_columns, check_increasing, read_table, seconds_column_ns
 from amrvio.io.trajectory import read_kitti
 from amrvio.types.sensors import Frame
@@ -33,7 +34,10 @@ def read_kitti_odometry(path: Path, calib: Path | None = None) -> Dataset:
     image_dir = path / "image_0"
     if not image_dir.is_dir():
         raise DatasetFormatError(path, "KITTI sequence: image_0/ folder is missing")
-    images = sorted(p for p in image_dir.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
+    try:
+        images = sorted(p for p in image_dir.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
+    except OSError as err:
+        raise DatasetFormatError(image_dir, f"cannot list the image folder: {err.strerror}") from None
     if not images:
         raise DatasetFormatError(image_dir, "no images")
     times_path = path / "times.txt"
@@ -46,7 +50,7 @@ def read_kitti_odometry(path: Path, calib: Path | None = None) -> Dataset:
             times_path, f"{len(stamps)} times for {len(images)} images in {image_dir}"
         )
     frames = tuple(
-        Frame(t_ns=int(t), index=i, path=p)
+        Frame(t_ns=int(t), index=i, path=p, loader=ImageFile(p))
         for i, (t, p) in enumerate(zip(stamps.tolist(), images, strict=True))
     )
     image_hw, image_name = first_image_shape(frames)

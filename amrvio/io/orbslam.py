@@ -9,8 +9,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import CalibrationError
+from amrvio.io.image import MAX_SIDE_PX, MIN_SIDE_PX
 from amrvio.types.camera import CameraModel, camera_from_params
 from amrvio.types.lie import SE3
+
+MAX_FOCAL_PX = 1e6
+"""Largest focal length or principal point coordinate (px) a settings file may give."""
 
 
 def line_of_key(path: Path, keys: Sequence[str]) -> int | None:
@@ -83,9 +87,21 @@ def read_orbslam_settings(path: Path) -> tuple[CameraModel, SE3 | None]:
             raise CalibrationError(path, f"{key} is not finite", line_of_key(path, [key]))
         return out
 
+    def check(key: str, value: float, ok: bool, need: str) -> None:
+        if not ok:
+            raise CalibrationError(path, f"{key} must be {need}, got {value:g}",
+                                   line_of_key(path, [key]))
+
     cam_type = str(data.get("Camera.type", "PinHole")).strip().lower()
     intr = [num(prefix + k) for k in ("fx", "fy", "cx", "cy")]
+    for k, v in zip(("fx", "fy"), intr[:2], strict=True):
+        check(prefix + k, v, 0 < v <= MAX_FOCAL_PX, f"in (0, {MAX_FOCAL_PX:g}] px")
+    for k, v in zip(("cx", "cy"), intr[2:], strict=True):
+        check(prefix + k, v, abs(v) <= MAX_FOCAL_PX, f"in [-{MAX_FOCAL_PX:g}, {MAX_FOCAL_PX:g}] px")
     size = [num("Camera.width"), num("Camera.height")]
+    for k, v in zip(("Camera.width", "Camera.height"), size, strict=True):
+        check(k, v, v == int(v) and MIN_SIDE_PX <= v <= MAX_SIDE_PX,
+              f"an integer in [{MIN_SIDE_PX}, {MAX_SIDE_PX}] px")
     if cam_type == "pinhole":
         dist = [num(prefix + k, 0.0) for k in ("k1", "k2", "p1", "p2")]
         k3 = num(prefix + "k3", 0.0)
@@ -100,8 +116,9 @@ def read_orbslam_settings(path: Path) -> tuple[CameraModel, SE3 | None]:
         )
     try:
         camera = camera_from_params("pinhole", dist_model, intr, coeffs, size)
-    except ValueError as err:
-        raise CalibrationError(path, str(err)) from None
+    except ValueError as err:  # the coefficients (the intrinsics and size are checked above)
+        key = prefix + ("k1" if dist_model != "none" else "fx")
+        raise CalibrationError(path, str(err), line_of_key(path, [key])) from None
     T_body_cam = None
     for key in ("IMU.T_b_c1", "Tbc"):
         if key in data:

@@ -22,8 +22,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import DatasetFormatError
-from amrvio.io.base import Dataset, first_image_shape, to_grey_u8
+from amrvio.io.base import MAX_ACCEL_M_S2, MAX_GYRO_RAD_S, Dataset, first_image_shape
 from amrvio.io.calib_load import load_checked_calibration
+from amrvio.io.image import check_decoded, decode_image
 from amrvio.types.sensors import Frame, ImuData
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -91,15 +92,19 @@ def _listing(topics: dict[str, str]) -> str:
 
 
 def image_from_msg(msg: Any, msgtype: str, where: str) -> U8:
-    """A sensor_msgs Image or CompressedImage as (H, W) uint8 grey."""
+    """A sensor_msgs Image or CompressedImage as (H, W) uint8 grey, checked like an image file
+    (:mod:`amrvio.io.image`)."""
+    if msgtype.endswith("CompressedImage"):
+        data = np.asarray(msg.data, dtype=np.uint8).tobytes()
+        return decode_image(data, where)
+    img = _raw_image(msg, where)
+    check_decoded(img, where)
+    return img
+
+
+def _raw_image(msg: Any, where: str) -> U8:
     import cv2
 
-    if msgtype.endswith("CompressedImage"):
-        data = np.asarray(msg.data, dtype=np.uint8)
-        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise DatasetFormatError(where, f"compressed image ({msg.format}) cannot be decoded")
-        return to_grey_u8(img, where)
     enc = str(msg.encoding).lower()
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     raw = np.asarray(msg.data, dtype=np.uint8)
@@ -257,4 +262,10 @@ def _imu_data(
     if not np.all(np.isfinite(v)):
         i = int(np.flatnonzero(~np.all(np.isfinite(v), axis=1))[0])
         raise DatasetFormatError(path, f"{topic}: IMU message at {t[i]} ns has a NaN value")
+    over = (np.abs(v[:, :3]) > MAX_GYRO_RAD_S).any(axis=1) | (
+        np.abs(v[:, 3:]) > MAX_ACCEL_M_S2).any(axis=1)
+    if np.any(over):
+        i = int(np.flatnonzero(over)[0])
+        raise DatasetFormatError(path, f"{topic}: IMU message at {t[i]} ns is beyond "
+                                       f"+-{MAX_GYRO_RAD_S:g} rad/s or +-{MAX_ACCEL_M_S2:g} m/s^2")
     return ImuData(t, v[:, :3], v[:, 3:])

@@ -110,13 +110,20 @@ def check_columns(table: TextTable, n_min: int, what: str, n_max: int | None = N
             raise DatasetFormatError(table.path, f"{what}: an empty column", line)
 
 
+def _plain(text: str) -> str:
+    """``text`` unless it has a ``_``: Python reads ``4_0.0`` as 40, a file means no such thing."""
+    if "_" in text:
+        raise ValueError(f"{text!r} has an underscore")
+    return text
+
+
 def _parsed_column(
     table: TextTable, col: int, what: str, parse: Callable[[str], int], expected: str
 ) -> I64:
     out = np.empty(len(table), dtype=np.int64)
     for i, (row, line) in enumerate(zip(table.rows, table.lines, strict=True)):
         try:
-            out[i] = parse(row[col])
+            out[i] = parse(_plain(row[col]))
         except (ValueError, OverflowError):
             raise DatasetFormatError(
                 table.path, f"{what}: {row[col]!r} is not {expected}", line
@@ -134,14 +141,14 @@ def float_columns(table: TextTable, cols: Sequence[int], what: str) -> F64:
     cols = list(cols)
     block = [[row[c] for c in cols] for row in table.rows]
     try:
-        flat = map(float, itertools.chain.from_iterable(block))
+        flat = map(float, map(_plain, itertools.chain.from_iterable(block)))
         out = np.fromiter(flat, dtype=np.float64, count=len(block) * len(cols))
         out = out.reshape(len(block), len(cols))
     except ValueError:
         for vals, line in zip(block, table.lines, strict=True):
             for v in vals:
                 try:
-                    float(v)
+                    float(_plain(v))
                 except ValueError:
                     raise DatasetFormatError(
                         table.path, f"{what}: {v!r} is not a number", line
@@ -154,6 +161,21 @@ def float_columns(table: TextTable, cols: Sequence[int], what: str) -> F64:
     return out
 
 
+def check_magnitude(table: TextTable, values: F64, limit: float, what: str) -> None:
+    """Every |value| of the (N, k) ``values`` (rows of ``table``) is at most ``limit``; the error
+    names the first line beyond it (an absurd finite number is a broken file, and it would
+    overflow the computations downstream)."""
+    over = np.abs(values) > limit
+    if np.any(over):
+        i = int(np.flatnonzero(np.any(over, axis=1))[0])
+        v = float(values[i][over[i]][0])
+        raise DatasetFormatError(table.path, f"{what}: {v:.6g} is beyond +-{limit:g}",
+                                 table.lines[i])
+
+
+MAX_ABS_TIME_S = 9e9
+"""Largest |time| in seconds: int64 nanoseconds end at 9.2e9 s (the year 2262)."""
+
 _DECIMAL = re.compile(r"^([+-]?)(\d*)(?:\.(\d*))?$")
 
 
@@ -163,14 +185,16 @@ def seconds_to_ns(text: str) -> int:
     if m is not None and (m.group(2) or m.group(3)):
         sign = -1 if m.group(1) == "-" else 1
         whole = int(m.group(2) or "0")
+        if whole > MAX_ABS_TIME_S:
+            raise ValueError(f"time {text[:40]!r} is beyond +-{MAX_ABS_TIME_S:g} s")
         frac = (m.group(3) or "")[:9].ljust(9, "0")
         # Round half up on the tenth fractional digit.
         extra = (m.group(3) or "")[9:10]
         ns = whole * 1_000_000_000 + int(frac) + (1 if extra and int(extra) >= 5 else 0)
         return sign * ns
-    value = float(text)  # exponent notation, e.g. KITTI's "1.037359e-01"
-    if not np.isfinite(value):
-        raise ValueError(f"non-finite time {text!r}")
+    value = float(_plain(text))  # exponent notation, e.g. KITTI's "1.037359e-01"
+    if not np.isfinite(value) or abs(value) > MAX_ABS_TIME_S:
+        raise ValueError(f"time {text!r} is not finite or beyond +-{MAX_ABS_TIME_S:g} s")
     return int(round(value * 1e9))
 
 

@@ -122,6 +122,8 @@ def _parse_rows(
         vals: list[float] = []
         for col, tok in enumerate(toks, start=1):
             try:
+                if "_" in tok:  # Python reads 4_0 as 40; a file means no such number
+                    raise ValueError(tok)
                 vals.append(float(tok))
             except ValueError:
                 raise TrajectoryFormatError(
@@ -142,6 +144,26 @@ def _parse_rows(
             path, f"column {col}: value {toks_all[i][col - 1]!r} is not finite", int(line_arr[i])
         )
     return _Rows(values, line_arr, toks_all)
+
+
+MAX_ABS_POSITION_M = 1e9
+"""Largest |coordinate| of a position (m): beyond any Earth-fixed frame; a larger value is a
+broken file (and its squares would overflow the alignment)."""
+MAX_ABS_STAMP_S = 9e9
+"""Largest |stamp| (s): int64 nanoseconds end at 9.2e9 s."""
+
+
+def _check_range(path: Path, values: F64, lines: I64, first_col: int, limit: float,
+                 what: str) -> None:
+    """|values| <= limit; the error names the line and the 1-based column
+    (``first_col`` + offset)."""
+    over = np.abs(values) > limit
+    if np.any(over):
+        i = int(np.flatnonzero(np.any(over, axis=1))[0])
+        j = int(np.flatnonzero(over[i])[0])
+        raise TrajectoryFormatError(
+            path, f"column {first_col + j}: {what} {values[i, j]:.6g} is beyond +-{limit:g}",
+            int(lines[i]))
 
 
 def _check_stamps(path: Path, stamps: ArrayLike, lines: I64) -> None:
@@ -187,6 +209,8 @@ def read_tum(path: str | Path) -> Trajectory:
     p = Path(path)
     rows = _parse_rows(p, "ws", (8,), "t x y z qx qy qz qw")
     v = rows.values
+    _check_range(p, v[:, :1], rows.lines, 1, MAX_ABS_STAMP_S, "timestamp [s]")
+    _check_range(p, v[:, 1:4], rows.lines, 2, MAX_ABS_POSITION_M, "position [m]")
     _check_stamps(p, v[:, 0], rows.lines)
     quats = _checked_quats(p, v[:, [7, 4, 5, 6]], rows.lines)
     return _make(p, v[:, 0], v[:, 1:4], quats)
@@ -202,14 +226,30 @@ def _fmt_stamp_s(t: float) -> str:
     return fixed if float(fixed) == t else repr(float(t))
 
 
-def write_tum(path: str | Path, traj: Trajectory) -> None:
-    """Write ``traj`` as a TUM file (stamps with at least 9 decimals, values repr-precise)."""
+def write_tum(path: str | Path, traj: Trajectory, comment: str | None = None) -> None:
+    """Write ``traj`` as a TUM file (stamps with at least 9 decimals, values repr-precise);
+    ``comment`` (one line, ``#`` added when missing) goes before the column header."""
     out = [_TUM_HEADER]
+    if comment is not None:
+        text = " ".join(comment.split())
+        out.insert(0, text if text.startswith("#") else f"# {text}")
     q = traj.quats_wxyz
     for t, pos, qq in zip(traj.stamps_s, traj.positions_m, q, strict=True):
-        vals = [*pos, qq[1], qq[2], qq[3], qq[0]]
-        out.append(" ".join([_fmt_stamp_s(float(t))] + [_fmt(v) for v in vals]))
+        line = tum_line(float(t), pos, qq)
+        if line is None:
+            raise ShapeError(f"{path}: a pose at t={float(t)!r} s is not finite")
+        out.append(line)
     Path(path).write_text("\n".join(out) + "\n", encoding="utf-8")
+
+
+def tum_line(t_s: float, position_m: ArrayLike, quat_wxyz: ArrayLike) -> str | None:
+    """One TUM line ``t x y z qx qy qz qw``; None when a value is not finite."""
+    pos = np.asarray(position_m, dtype=np.float64).reshape(3)
+    q = np.asarray(quat_wxyz, dtype=np.float64).reshape(4)
+    if not (np.isfinite(t_s) and np.all(np.isfinite(pos)) and np.all(np.isfinite(q))):
+        return None
+    vals = [*pos, q[1], q[2], q[3], q[0]]
+    return " ".join([_fmt_stamp_s(float(t_s))] + [_fmt(float(v)) for v in vals])
 
 
 # --------------------------------------------------------------------------------------- KITTI
@@ -219,6 +259,7 @@ def read_kitti_times(path: str | Path) -> F64:
     """Read a KITTI times file: one stamp in seconds per line, strictly increasing."""
     p = Path(path)
     rows = _parse_rows(p, "ws", (1,), "t_s")
+    _check_range(p, rows.values, rows.lines, 1, MAX_ABS_STAMP_S, "timestamp [s]")
     _check_stamps(p, rows.values[:, 0], rows.lines)
     return np.asarray(rows.values[:, 0], dtype=np.float64)
 
@@ -231,6 +272,9 @@ def read_kitti(path: str | Path, times: str | Path | ArrayLike | None = None) ->
     p = Path(path)
     rows = _parse_rows(p, "ws", (12,), "row-major 3x4 matrix [R|t]")
     m = rows.values.reshape(-1, 3, 4)
+    for c in (3, 7, 11):
+        _check_range(p, rows.values[:, c:c + 1], rows.lines, c + 1, MAX_ABS_POSITION_M,
+                     "translation [m]")
     Rs = m[:, :, :3]
     ortho = np.abs(Rs @ np.transpose(Rs, (0, 2, 1)) - np.eye(3)).max(axis=(1, 2))
     dets = np.linalg.det(Rs)
@@ -286,8 +330,10 @@ def read_euroc_csv(path: str | Path) -> EurocGroundTruth:
     for i, toks in enumerate(rows.tokens):
         tok = toks[0]
         try:
+            if "_" in tok:
+                raise ValueError(tok)
             stamps_ns[i] = int(tok)
-        except ValueError:
+        except (ValueError, OverflowError):
             raise TrajectoryFormatError(
                 p,
                 f"column 1: timestamp {tok[:40]!r} is not an integer number of nanoseconds",
@@ -295,6 +341,9 @@ def read_euroc_csv(path: str | Path) -> EurocGroundTruth:
             ) from None
     _check_stamps(p, stamps_ns, rows.lines)
     v = rows.values
+    _check_range(p, v[:, 1:4], rows.lines, 2, MAX_ABS_POSITION_M, "position [m]")
+    if v.shape[1] > 8:
+        _check_range(p, v[:, 8:], rows.lines, 9, 1e6, "velocity or bias")
     quats = _checked_quats(p, v[:, 4:8], rows.lines)
     # Seconds from integer ns without the rounding of a single float division of 1e18 values.
     stamps_s = (stamps_ns // 1_000_000_000).astype(np.float64) + (

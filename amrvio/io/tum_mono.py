@@ -16,8 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import DatasetFormatError
-from amrvio.io.base import Dataset, first_image_shape, to_grey_u8, warn_missing_images
+from amrvio.io.base import Dataset, first_image_shape, warn_missing_images
 from amrvio.io.calib_load import load_checked_calibration, read_photometric
+from amrvio.io.image import ImageFile, decode_image
 from amrvio.io.table import (
     check_columns,
     check_increasing,
@@ -40,7 +41,6 @@ class ZipImage:
     member: str
 
     def __call__(self) -> U8:
-        import cv2
 
         where = f"{self.archive}!{self.member}"
         try:
@@ -48,10 +48,11 @@ class ZipImage:
                 data = zf.read(self.member)
         except (OSError, KeyError, zipfile.BadZipFile) as err:
             raise DatasetFormatError(where, f"cannot read zip member ({err})") from None
-        img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise DatasetFormatError(where, "image cannot be decoded")
-        return to_grey_u8(img, where)
+        return decode_image(data, where)
+
+    @property
+    def where(self) -> str:
+        return f"{self.archive}!{self.member}"
 
 
 def _image_index(path: Path) -> tuple[dict[str, str], Path | None]:
@@ -104,7 +105,8 @@ def read_tum_mono(path: Path, calib: Path | None = None) -> Dataset:
         exposure_s = None if exposure_ms is None else float(exposure_ms[i]) / 1000.0
         t_ns = int(stamps[i])
         if archive is None:
-            frames.append(Frame(t_ns, len(frames), path / "images" / name, exposure_s))
+            image = path / "images" / name
+            frames.append(Frame(t_ns, len(frames), image, exposure_s, ImageFile(image)))
         else:
             loader = ZipImage(archive, name)
             frames.append(Frame(t_ns, len(frames), None, exposure_s, loader))

@@ -99,7 +99,6 @@ class Pipeline:
         self.diagnostics = diagnostics
         self.blur = BlurScorer(cfg.diagnostics.blur)
         self.records: list[FrameRecord] = []
-        self.initialised = False
         self.timings: dict[str, float] = {}
 
     def _toc(self, stage: str, t0: float) -> None:
@@ -137,7 +136,7 @@ class Pipeline:
             return rec
         if not self.tracker.started:
             step = self._start(index, image, events, keep_tracks=False)
-        elif not self.initialised:
+        elif not self.tracker.mapped:
             step = self._init_step(index, image, blurred, events)
         else:
             step = self._track_step(index, image, blurred, events)
@@ -173,7 +172,6 @@ class Pipeline:
         """Frame ``index`` becomes the reference of a new initialisation attempt."""
         self.tracker.restart(img, keep_tracks)
         self.initializer.begin(index, img, self.tracker.tracks, keep_tracks)
-        self.initialised = False
         T_guess = self.tracker.motion.guess()
         return _Step(self._absolute(PoseStatus.LOST, T_guess), T_guess,
                      self.tracker.started_report(), init)
@@ -228,7 +226,6 @@ class Pipeline:
         seg_id = len(self.mapping.segments) - 1
         tracks = self.tracker.tracks
         new = self.initializer.build(index, tracks, seg.mapper)
-        self.initialised = True
         for fp in new.between:
             old = self.composer.anchors[fp.index]
             if fp.T_cam_kf0 is not None:
@@ -313,7 +310,6 @@ class Pipeline:
         the frame becomes a keyframe of the same segment (one map, one scale)."""
         self.tracker.tracks.reset(ids, uv)
         self.tracker.resume(img, T_cam_world)
-        self.initialised = True
         events.append(f"relocalised:{len(ids)}")
         rep = dataclasses.replace(rep, outcome=TrackOutcome.TRACKED, n_inliers=len(ids))
         return self._keyframe(index, img, T_cam_world, KeyframeReason.RELOCALISED, rep)

@@ -55,6 +55,24 @@ SIM_OUTPUTS = ("mav0", "times.txt", "pcalib.txt", "vignette.png", "wheel_odometr
 
 Progress = Callable[[int, int], None]
 
+SIM_BOUNDS: dict[str, tuple[float, float]] = {
+    "seconds": (0.05, 3600.0),
+    "seed": (0, 2**32 - 1),
+    "imu_rate_hz": (1.0, 10_000.0),
+    "side_px": (16, 4096),
+    "replay_start_s": (0.0, 1e6),
+    "replay_smoothing": (0.0, 1e6),
+}
+"""Closed ranges of the numeric options (``amrvio simulate --help`` states them)."""
+MAX_PIXELS = 4096 * 3072
+"""Largest image (pixels) the simulator renders."""
+MAX_FRAMES = 100_000
+"""Most frames one simulation renders (--seconds x --fps)."""
+MAX_ABS_EV = 10.0
+"""Largest scripted exposure step, in EV (a factor of 1024)."""
+MAX_BURST_RAD_S = 30.0
+"""Largest blur-burst yaw rate (rad/s, about 1700 deg/s: beyond a MEMS gyro's range)."""
+
 
 @dataclass(frozen=True, slots=True)
 class SimConfig:
@@ -124,20 +142,20 @@ class SimConfig:
         if self.camera_model not in ("pinhole", "radtan"):
             raise ConfigError(f"camera model must be pinhole or radtan, got {self.camera_model!r}")
         if not (math.isfinite(self.exposure_ms) and self.exposure_ms > 0):
-            raise ConfigError(f"exposure must be > 0 ms, got {self.exposure_ms}")
+            raise ConfigError(f"--exposure-ms must be > 0, got {self.exposure_ms}")
         if self.exposure_ms * 1e-3 > 0.9 / self.fps:
             raise ConfigError(
-                f"exposure {self.exposure_ms} ms does not fit in the frame period "
+                f"--exposure-ms {self.exposure_ms:g} does not fit in the frame period "
                 f"{1e3 / self.fps:.2f} ms (max 90 %)"
             )
         if not (math.isfinite(self.analog_gain) and 0.0 < self.analog_gain <= 64.0):
-            raise ConfigError(f"analog gain must be in (0, 64], got {self.analog_gain}")
+            raise ConfigError(f"--gain (analog gain) must be in (0, 64], got {self.analog_gain}")
         if not (0.2 <= self.response_gamma <= 5.0):
-            raise ConfigError(f"response gamma must be in [0.2, 5], got {self.response_gamma}")
+            raise ConfigError(f"--response-gamma must be in [0.2, 5], got {self.response_gamma}")
         if not (-1.0 < self.vignette_v1 <= 0.0):
-            raise ConfigError(f"vignette v1 must be in (-1, 0], got {self.vignette_v1}")
+            raise ConfigError(f"--vignette-v1 must be in (-1, 0], got {self.vignette_v1}")
         if self.replay_smoothing < 0:
-            raise ConfigError(f"replay smoothing must be >= 0, got {self.replay_smoothing}")
+            raise ConfigError(f"--replay-smoothing must be >= 0, got {self.replay_smoothing}")
         if self.ev_steps and self.auto_exposure:
             raise ConfigError("use either --ev-steps or --auto-exposure, not both")
         if not (math.isfinite(self.imu_rate_hz) and math.isfinite(self.wheel_rate_hz)
@@ -145,10 +163,42 @@ class SimConfig:
             raise ConfigError("IMU and wheel rates must be finite and > 0 Hz")
         if self.seed < 0:
             raise ConfigError(f"--seed must be >= 0, got {self.seed}")
-        parse_ev_steps(self.ev_steps)
-        parse_blur_bursts(self.blur_bursts)
+        for option, value, (lo, hi) in (
+            ("--seconds", self.seconds, SIM_BOUNDS["seconds"]),
+            ("--seed", self.seed, SIM_BOUNDS["seed"]),
+            ("--imu-rate", self.imu_rate_hz, SIM_BOUNDS["imu_rate_hz"]),
+            ("wheel rate", self.wheel_rate_hz, SIM_BOUNDS["imu_rate_hz"]),
+            ("--resolution width", self.width, SIM_BOUNDS["side_px"]),
+            ("--resolution height", self.height, SIM_BOUNDS["side_px"]),
+            ("--replay-start", self.replay_start_s, SIM_BOUNDS["replay_start_s"]),
+            ("--replay-smoothing", self.replay_smoothing, SIM_BOUNDS["replay_smoothing"]),
+        ):
+            if not ((isinstance(value, int) or math.isfinite(value)) and lo <= value <= hi):
+                raise ConfigError(f"{option} must be in [{lo:g}, {hi:g}], got {value}")
+        if self.width * self.height > MAX_PIXELS:
+            raise ConfigError(f"--resolution {self.width}x{self.height}: at most {MAX_PIXELS} "
+                              "pixels (e.g. 2048x1536)")
+        n_frames = self.seconds * self.fps
+        if n_frames > MAX_FRAMES:
+            raise ConfigError(f"--seconds {self.seconds:g} at --fps {self.fps:g} gives "
+                              f"{n_frames:.0f} frames; at most {MAX_FRAMES}")
+        for t, ev in parse_ev_steps(self.ev_steps):
+            if t > self.seconds or abs(ev) > MAX_ABS_EV:
+                raise ConfigError(f"--ev-steps item {t:g}:{ev:g}: need a time in [0, --seconds] "
+                                  f"and |EV| <= {MAX_ABS_EV:g}")
+        for b in parse_blur_bursts(self.blur_bursts):
+            if b.t0_s < 0 or b.t0_s > self.seconds or b.dur_s > self.seconds \
+                    or abs(b.omega_rad_s) > MAX_BURST_RAD_S:
+                raise ConfigError(f"--blur-bursts item {b.t0_s:g}:{b.dur_s:g}:{b.omega_rad_s:g}: "
+                                  "need t0 in [0, --seconds], dur <= --seconds and |omega| <= "
+                                  f"{MAX_BURST_RAD_S:g} rad/s")
         parse_blackouts(self.blackouts, self.seconds)
-        parse_slips(self.wheel_slips)
+        for sl in parse_slips(self.wheel_slips):
+            if sl.t0_s < 0 or sl.t0_s > self.seconds or sl.dur_s > self.seconds \
+                    or not -1.0 <= sl.slip <= 10.0:
+                raise ConfigError(f"--wheel-slips item {sl.t0_s:g}:{sl.dur_s:g}:{sl.slip:g}: "
+                                  "need t0 in [0, --seconds], dur <= --seconds and slip in "
+                                  "[-1, 10]")
 
 
 @dataclass(frozen=True, slots=True)
@@ -262,8 +312,11 @@ def _replay_sources(config: SimConfig, rngs: list[np.random.Generator]) -> _Sour
 
     gt_path = Path(str(config.trajectory))
     ns, p, q, bg, ba = load_groundtruth(gt_path)
-    motion = make_replay_motion(ns, p, q, config.replay_start_s, config.seconds,
-                                config.replay_smoothing, bg, ba)
+    try:
+        motion = make_replay_motion(ns, p, q, config.replay_start_s, config.seconds,
+                                    config.replay_smoothing, bg, ba)
+    except ConfigError as err:  # the message names no file: name the one it is about
+        raise ConfigError(f"--trajectory {gt_path}: {err}") from None
     # extrinsic: explicit file, else the source's cam0/sensor.yaml (EuRoC layout), else default
     T_body_cam = default_T_body_cam(config.camera_pitch_deg)
     ext = (Path(config.cam_extrinsic) if config.cam_extrinsic
