@@ -31,7 +31,9 @@ class KltConfig:
     """Front-end settings (pixels). ``detector``: bucketed corners; its ``max_corners`` is the
     number of tracks kept alive and its ``border_px`` the detection margin (tracks may come within
     half of it). ``wide_pyr_levels``: pyramid depth after blur or a gap. ``photometric``: affine
-    brightness compensation (else none). ``ransac_thresh_px``: essential-matrix outlier gate."""
+    brightness compensation (else none). ``ransac_thresh_px``: essential-matrix outlier gate.
+    ``max_width_px``: wider images (HD video) are tracked on the first pyramid level narrower
+    than this, positions staying in full-resolution pixels (None: full resolution)."""
 
     detector: DetectorConfig = field(default_factory=_vo_detector)
     win_size: int = 21
@@ -41,6 +43,7 @@ class KltConfig:
     photometric: bool = True
     ransac_thresh_px: float = 1.0
     max_iterations: int = 30  # 15 measured: KITTI alike, sim corridor 0.13 -> 0.75 % ATE
+    max_width_px: int | None = 1280
 
     @property
     def max_features(self) -> int:
@@ -54,6 +57,7 @@ class KltConfig:
             max_iterations=self.max_iterations, epsilon=0.01, fb_thresh_px=self.fb_thresh_px,
             max_error=None, border_px=self.detector.border_px * 0.5,
             epipolar=EpipolarConfig(thresh_px=self.ransac_thresh_px, seed=seed),
+            max_width_px=self.max_width_px,
         )
 
 

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from amrvio.frontend.direct import DirectConfig, align_direct
 from amrvio.frontend.klt import KltConfig, KltResult, KltTracker, detect_bucketed, predict_tracks
 from amrvio.frontend.tracks import UNANCHORED, TrackSet
-from amrvio.geometry.pnp import solve_pnp
+from amrvio.geometry.pnp import PnPResult, solve_pnp
 from amrvio.geometry.projection import normalized_to_bearings, pixels_to_normalized, project
 from amrvio.geometry.two_view import robust_rotation
 from amrvio.types.lie import se3_matrix_inverse
@@ -46,7 +46,9 @@ class Landmarks(Protocol):
 class TrackingConfig:
     """KLT front-end, PnP gates (pixels), the direct-alignment prior/fallback switches, and the
     rotation-only update: when PnP fails, a frame whose tracks one rotation explains (median
-    residual under ``rotation_max_px``) is posed by that rotation about the last position."""
+    residual under ``rotation_max_px``) is posed by that rotation about the last position;
+    ``retry_unpredicted``: when PnP fails, KLT is run again from the previous positions (no
+    motion prediction, deep pyramid) before the fallbacks."""
 
     klt: KltConfig = field(default_factory=KltConfig)
     direct: DirectConfig = field(default_factory=DirectConfig)
@@ -57,6 +59,7 @@ class TrackingConfig:
     huber_px: float = 2.0
     rotation_only: bool = True
     rotation_max_px: float = 1.0
+    retry_unpredicted: bool = True
 
 
 class TrackOutcome(Enum):
@@ -70,6 +73,7 @@ class TrackOutcome(Enum):
     PREDICTED = "predicted"  # blurred and PnP failed: the motion-model pose
     DIRECT = "direct_fallback"  # pose from direct alignment; tracks re-seeded from the map
     ROTATION = "rotation_only"  # too few map points, but one rotation explains the flow
+    REPEATED = "repeated_frame"  # the image repeats the last one exactly: its pose, no tracking
     LOST = "lost"  # no pose: tracking must restart
 
 
@@ -188,6 +192,9 @@ class Tracker:
     def started_report(self) -> TrackingReport:
         return self._report(TrackOutcome.STARTED, None)
 
+    def repeated_report(self) -> TrackingReport:
+        return self._report(TrackOutcome.REPEATED, None)
+
     def track_to_reference(self, img: U8, blurred: bool) -> TrackingReport:
         """Before the map exists: KLT from the last good image; commit unless ``blurred``."""
         if self.prev_img is None:
@@ -226,16 +233,13 @@ class Tracker:
         xyz[has] = m.xyz[tr.ids[has]]
         pred = predict_tracks(self.K, T_pred, V[:3, :3], tr.pts, xyz, has, img.shape)
         self._toc("predict", t0)
-        t0 = time.perf_counter()
-        res = self.klt.track(self.prev_img, img, tr.pts, pts_pred=pred, wide=self.gap > 0,
-                             K=self.K)
-        self._toc("klt", t0)
-        use = res.ok & has
-        t0 = time.perf_counter()
-        pnp = solve_pnp(m.xyz[tr.ids[use]], res.pts[use], self.K, T_guess=T_pred,
-                        ransac_thresh_px=cfg.pnp_thresh_px, min_inliers=cfg.min_pnp_inliers,
-                        huber_px=cfg.huber_px, seed=self.seed)
-        self._toc("pnp", t0)
+        res, use, pnp = self._klt_pnp(img, pred, self.gap > 0, has, m, T_pred)
+        if not pnp.ok and not blurred and cfg.retry_unpredicted:
+            # the motion model can be wrong (a jerky hand, a repeated or dropped frame): track
+            # again from where the points were, with the deep pyramid
+            res2, use2, pnp2 = self._klt_pnp(img, None, True, has, m, T_last)
+            if pnp2.ok:
+                res, use, pnp = res2, use2, pnp2
         if not pnp.ok:
             if blurred:
                 self.gap += 1
@@ -273,6 +277,31 @@ class Tracker:
         self.gap = 0
         return TrackStep(self._report(TrackOutcome.TRACKED, res, n_inl, prior, pnp.status.value),
                          T_cw, obs)
+
+    def _klt_pnp(self, img: U8, pred: F64 | None, wide: bool, has: NDArray[np.bool_],
+                 m: Landmarks, T_guess: F64) -> tuple[KltResult, NDArray[np.bool_], PnPResult]:
+        """KLT of the tracks into ``img`` (from ``pred``, or from where they were) and PnP of
+        those with a map point."""
+        if self.prev_img is None:
+            raise RuntimeError("Tracker: KLT without a previous image")
+        cfg, tr = self.cfg, self.tracks
+        t0 = time.perf_counter()
+        res = self.klt.track(self.prev_img, img, tr.pts, pts_pred=pred, wide=wide, K=self.K)
+        self._toc("klt", t0)
+        use = res.ok & has
+        t0 = time.perf_counter()
+        pnp = solve_pnp(m.xyz[tr.ids[use]], res.pts[use], self.K, T_guess=T_guess,
+                        ransac_thresh_px=cfg.pnp_thresh_px, min_inliers=cfg.min_pnp_inliers,
+                        huber_px=cfg.huber_px, seed=self.seed)
+        self._toc("pnp", t0)
+        return res, use, pnp
+
+    def is_repeat(self, img: U8) -> bool:
+        """True when ``img`` repeats the last tracked image exactly (a recorder that duplicates
+        frames): it carries no new view."""
+        prev = self.prev_img
+        return prev is not None and prev.shape == img.shape and \
+            bool(np.array_equal(prev[::4, ::4], img[::4, ::4])) and bool(np.array_equal(prev, img))
 
     def _rotation(self, res: KltResult) -> F64 | None:
         """R_cur_prev when one rotation explains the tracked flow, else None."""

@@ -38,6 +38,13 @@ F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
 
 
+def no_signal(image: U8) -> bool:
+    """True for an image without scene signal: dark (mean under 3 DN) with its 99th percentile
+    under 12 DN, on a 4x subsample (a covered lens shows only the sensor's read noise)."""
+    sub = image[::4, ::4]
+    return float(sub.mean()) < 3.0 and float(np.percentile(sub, 99)) < 12.0
+
+
 @dataclass(frozen=True, slots=True)
 class _Step:
     """What one frame produced, before it becomes a record: the pose anchor, the absolute
@@ -125,16 +132,31 @@ class Pipeline:
         t0 = time.perf_counter()
         # the diagnostics scored this very image already, unless it was undistorted since
         score = health.blur.score if health is not None and not undistorted else blur_score(image)
-        blur = self.blur.update(score)
-        blurred = bool(blur.is_blurred) and self.cfg.blur_gating
-        self._toc("blur", t0)
         events: list[str] = []
+        if no_signal(image):
+            # a covered lens or a black frame: nothing to track, and its sensor noise must not
+            # become the blur reference (it would make the next sharp frames look blurred)
+            blur = BlurResult(score, float("nan"), float("nan"), False)
+            blurred = True
+            events.append("no_signal")
+        else:
+            blur = self.blur.update(score)
+            blurred = bool(blur.is_blurred) and self.cfg.blur_gating
+        self._toc("blur", t0)
         if not self.cfg.track:
             rec = FrameRecord(index, t_ns, PoseStatus.LOST, None, None, None, 1.0, (), blur, health,
                               None, EstimatorReport())
             self.records.append(rec)
             return rec
-        if not self.tracker.started:
+        if self.tracker.started and not blurred and self.tracker.is_repeat(image):
+            # a recorder that repeats frames: the image shows the previous frame's view
+            events.append("repeated_frame")
+            T_cw = self.tracker.motion.T_last if self.tracker.mapped and \
+                self.tracker.motion.T_last is not None else np.eye(4)
+            anchor = PoseAnchor(PoseStatus.TRACKED, AnchorKind.FRAME, self._segment_id(), None,
+                                np.eye(4), None, index - 1)
+            step = _Step(anchor, T_cw, self.tracker.repeated_report())
+        elif not self.tracker.started:
             step = self._start(index, image, events, keep_tracks=False)
         elif not self.tracker.mapped:
             step = self._init_step(index, image, blurred, events)
@@ -183,11 +205,9 @@ class Pipeline:
         if blurred:
             return _Step(self._absolute(PoseStatus.LOST, T_hold), T_hold, report)
         if self.recovery.target is not None:
-            lost_map = self.mapping.segments[self.recovery.target].mapper.map
-            reloc = self.recovery.attempt(img, lost_map)
-            if reloc is not None and reloc.ok and reloc.T_cam_world is not None:
-                return self._relocalised(index, img, reloc.T_cam_world, reloc.point_ids,
-                                         reloc.uv, report, events)
+            found = self._try_reloc(self.recovery.target, img, events, report)
+            if found is not None:
+                return found
         res = self.initializer.attempt(index, self.tracker.tracks)
         if res.ok:
             return self._make_map(index, img, res, report, events)
@@ -260,6 +280,13 @@ class Pipeline:
     def _track_step(self, index: int, img: U8, blurred: bool, events: list[str]) -> _Step:
         seg = self.mapping.current
         tracks = self.tracker.tracks
+        if not blurred and self.tracker.gap >= self.cfg.recovery.max_bridge_frames:
+            # back after a long gap (blur, a covered lens): the motion model is stale, so the
+            # map is searched by appearance first
+            reloc = self._try_reloc(len(self.mapping.segments) - 1, img, events)
+            self.recovery.give_up()
+            if reloc is not None:
+                return reloc
         step = self.tracker.track(img, blurred, seg.mapper.map, seg.world_from_segment.s)
         rep = step.report
         if rep.direct_prior:
@@ -270,11 +297,9 @@ class Pipeline:
                          step.T_cam_world, rep)
         if rep.outcome is TrackOutcome.LOST:
             events.append(f"lost:{rep.pnp_status}")
-            self.recovery.lost(len(self.mapping.segments) - 1)
-            reloc = self.recovery.attempt(img, seg.mapper.map)
-            if reloc is not None and reloc.ok and reloc.T_cam_world is not None:
-                return self._relocalised(index, img, reloc.T_cam_world, reloc.point_ids,
-                                         reloc.uv, rep, events)
+            found = self._try_reloc(len(self.mapping.segments) - 1, img, events, rep)
+            if found is not None:
+                return found
             lost = self._start(index, img, events, keep_tracks=False)
             return dataclasses.replace(lost, tracking=dataclasses.replace(lost.tracking,
                                                                           outcome=TrackOutcome.LOST))
@@ -303,6 +328,21 @@ class Pipeline:
         self.recovery.add_keyframe(len(self.mapping.segments) - 1, kf.kf_id, img, seg.mapper.map)
         reading = self.scale.observe_keyframe(seg, kf.kf_id)
         return _Step(self._on_keyframe(T_cw, kf.kf_id, None), T_cw, rep, None, kf, reading)
+
+    def _try_reloc(self, segment: int, img: U8, events: list[str],
+                   rep: TrackingReport | None = None) -> _Step | None:
+        """Search ``segment``'s map for ``img``; the relocalised step, or None."""
+        self.recovery.lost(segment)
+        reloc = self.recovery.attempt(img, self.mapping.segments[segment].mapper.map)
+        if reloc is None:
+            return None
+        if not reloc.ok or reloc.T_cam_world is None:
+            events.append(f"reloc_failed:{reloc.status.value}:{reloc.n_matches}:{reloc.n_inliers}")
+            return None
+        if rep is None:
+            rep = self.tracker.started_report()
+        return self._relocalised(len(self.records), img, reloc.T_cam_world, reloc.point_ids,
+                                 reloc.uv, rep, events)
 
     def _relocalised(self, index: int, img: U8, T_cam_world: F64, ids: NDArray[np.int64],
                      uv: F64, rep: TrackingReport, events: list[str]) -> _Step:

@@ -25,9 +25,12 @@ U8 = NDArray[np.uint8]
 @dataclass(frozen=True, slots=True)
 class RecoveryConfig:
     """``enabled``: try relocalisation after a loss; ``reloc``: its gates; ``max_features``:
-    descriptors kept per keyframe."""
+    descriptors kept per keyframe; ``max_bridge_frames``: after this many frames without a
+    usable image (blurred, dark), the map is searched by appearance before the motion model is
+    trusted again."""
 
     enabled: bool = True
+    max_bridge_frames: int = 5
     reloc: RelocConfig = field(default_factory=RelocConfig)
     max_features: int = 1500
 
