@@ -25,13 +25,10 @@ from amrvio.diagnostics.exposure import (
     ExposureChange,
     ExposureConfig,
     ExposureFrame,
-    TrackingConfig,
-    detection_mask,
-    fit_exposure_frames,
     fit_exposure_same_pixel,
+    fit_exposure_tracked,
     prepare_exposure_frame,
     saturated_fraction,
-    tracker_mask,
 )
 from amrvio.diagnostics.health import (
     EXCITATION_COLUMNS,
@@ -55,9 +52,17 @@ from amrvio.diagnostics.smear import (
     max_exposure_for_smear,
     predict_smear,
 )
+from amrvio.diagnostics.tracks import (
+    TrackFrame,
+    TrackingConfig,
+    detection_mask,
+    prepare_track_frame,
+    track_between,
+    tracker_mask,
+)
 from amrvio.errors import ShapeError
 from amrvio.tracking.detect import detect_corners
-from amrvio.tracking.lk import LkTracker, TrackImage
+from amrvio.tracking.lk import LkTracker
 from amrvio.types.camera import CameraModel, PinholeCamera
 from amrvio.types.lie import SE3
 from amrvio.types.sensors import ImuData
@@ -101,7 +106,7 @@ class _Previous:
     """What the stage keeps of the previous frame."""
 
     image: U8
-    track: TrackImage
+    track: TrackFrame
     exposure: ExposureFrame
     t_ns: int
 
@@ -190,10 +195,11 @@ class FrameDiagnostics:
             )
         return pred, advice
 
-    def _new_reference(self, track: TrackImage, expo_frame: ExposureFrame) -> None:
-        mask = tracker_mask(detection_mask(expo_frame), track.lk.shape, track.levels)
-        pts = detect_corners(track.lk, self.config.tracking.detector, mask=mask)
-        self._ref.restart(np.asarray(pts * track.scale, dtype=np.float32))
+    def _new_reference(self, track: TrackFrame, expo_frame: ExposureFrame) -> None:
+        t = track.image
+        mask = tracker_mask(detection_mask(expo_frame.bad), t.lk.shape, t.levels)
+        pts = detect_corners(t.lk, self.config.tracking.detector, mask=mask)
+        self._ref.restart(np.asarray(pts * t.scale, dtype=np.float32))
 
     def _gyro_rotation(self, prev_t: int, t_ns: int) -> F64 | None:
         """Gyro rotation prev -> cur (camera frame), None when the reference lost it or the IMU
@@ -204,19 +210,19 @@ class FrameDiagnostics:
             return None
         return integrate_gyro(imu_t, self._imu.g, prev_t, t_ns, self.R_cam_body, self.gyro_bias)
 
-    def _track(self, prev: _Previous, track: TrackImage, img: U8, expo_frame: ExposureFrame,
+    def _track(self, prev: _Previous, track: TrackFrame, img: U8, expo_frame: ExposureFrame,
                t_ns: int) -> tuple[ExposureChange, float, RotationSource, bool]:
         """Track from the previous frame: the exposure change, the parallax (px) and its
         rotation source, and whether this frame became the parallax reference."""
         cfg, ref = self.config, self._ref
         ref.rotate(self._gyro_rotation(prev.t_ns, t_ns))
-        res = self._tracker.track(prev.track, track, ref.pts)
+        res = track_between(self._tracker, prev.track, track, ref.pts)
         ok = res.ok
         pts1 = np.asarray(res.pts, dtype=np.float32)
         n_ok = int(ok.sum())
-        if n_ok >= cfg.exposure.min_tracks:
-            expo = fit_exposure_frames(prev.exposure, expo_frame, ref.pts[ok], pts1[ok], cfg.exposure)
-        else:
+        expo = fit_exposure_tracked(self._tracker, (prev.track, track), (prev.exposure, expo_frame),
+                                    ref.pts[ok], pts1[ok], cfg.exposure, cfg.tracking.detector)
+        if expo is None:
             expo = fit_exposure_same_pixel(prev.image, img, cfg.exposure, self.inverse_response)
         ref.advance(pts1, ok)
         par = ref.measure(self._camera_for(img.shape[:2]))
@@ -252,7 +258,7 @@ class FrameDiagnostics:
         if imu_window is not None:
             self._imu.add(imu_window)
 
-        track = self._tracker.prepare(img)
+        track = prepare_track_frame(self._tracker, img)
         expo_frame = prepare_exposure_frame(img, cfg.exposure, self.inverse_response)
         expo: ExposureChange | None = None
         parallax = float("nan")
