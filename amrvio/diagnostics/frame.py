@@ -9,7 +9,8 @@ Blur: ``blur.var_lap`` is the seed's Var(Delta I) of the raw image. The scene-no
 ``blur.ratio`` divides the contrast-normalised :func:`~amrvio.diagnostics.blur.blur_score` (the
 VO's), Var(Delta I) / Var(I), by the median of recent sharp frames: an exposure step scales both
 variances by a^2, so it does not read as blur. ``blur.flag`` is set when that ratio is low or
-when the gyro-predicted smear exceeds ``smear_flag_px``.
+when the predicted smear (rotation from the gyro, plus translation when the caller passes a
+:class:`~amrvio.diagnostics.smear.CameraMotion`) exceeds ``smear_flag_px``.
 """
 
 from __future__ import annotations
@@ -47,10 +48,12 @@ from amrvio.diagnostics.parallax import (
     parallax_reference_due,
 )
 from amrvio.diagnostics.smear import (
+    CameraMotion,
     SmearPrediction,
     integrate_gyro,
     max_exposure_for_smear,
     predict_smear,
+    predict_smear_from_rates,
 )
 from amrvio.diagnostics.tracks import (
     TrackFrame,
@@ -179,20 +182,25 @@ class FrameDiagnostics:
         h, w = shape
         return PinholeCamera(w, h, float(w), float(w), (w - 1) / 2.0, (h - 1) / 2.0)
 
-    def _smear(self, t_ns: int, exposure_s: float | None) -> tuple[SmearPrediction | None, float | None]:
+    def _smear(self, t_ns: int, exposure_s: float | None, motion: CameraMotion | None,
+               ) -> tuple[SmearPrediction | None, float | None]:
         T = exposure_s if exposure_s is not None else self.config.assumed_exposure_s
-        if self.camera is None or T is None or self._imu.t.size < 2:
+        if self.camera is None or T is None:
             return None, None
-        if t_ns - int(T * 0.5e9) < self._imu.t[0] or t_ns + int(T * 0.5e9) > self._imu.t[-1] + 20_000_000:
+        imu_t = self._imu.t
+        covered = (imu_t.size >= 2 and t_ns - int(T * 0.5e9) >= imu_t[0]
+                   and t_ns + int(T * 0.5e9) <= imu_t[-1] + 20_000_000)
+        if covered:
+            pred = predict_smear(self.camera, imu_t, self._imu.g, t_ns, T, self.R_cam_body,
+                                 self.gyro_bias, motion=motion)
+        elif motion is not None and motion.omega_cam_rad_s is not None:
+            pred = predict_smear_from_rates(self.camera, motion, T)
+        else:
             return None, None
-        pred = predict_smear(
-            self.camera, self._imu.t, self._imu.g, t_ns, T, self.R_cam_body, self.gyro_bias
-        )
         advice = None
         if pred.max_px > self.config.smear_bound_px:
-            advice = max_exposure_for_smear(
-                self.camera, pred.omega_cam_rad_s, self.config.smear_bound_px
-            )
+            advice = max_exposure_for_smear(self.camera, pred.omega_cam_rad_s,
+                                            self.config.smear_bound_px, motion=motion)
         return pred, advice
 
     def _new_reference(self, track: TrackFrame, expo_frame: ExposureFrame) -> None:
@@ -238,11 +246,15 @@ class FrameDiagnostics:
         imu_window: ImuData | None = None,
         exposure_s: float | None = None,
         frame_index: int | None = None,
+        motion: CameraMotion | None = None,
     ) -> FrameHealth:
         """Diagnose one (H, W) uint8 grey frame taken at ``t_ns`` (mid-exposure).
 
         ``imu_window``: IMU samples since the previous call, reaching at least to the end of this
         frame's exposure (overlaps are ignored). ``exposure_s``: the frame's exposure time if known.
+        ``motion``: the camera's velocity and the depths of tracked points when the caller knows
+        them (VIO, VO with scale, or a wheel odometer); the predicted smear then includes the
+        translational part, else it is the rotational part alone.
         """
         img = np.asarray(frame_image)
         if img.ndim != 2 or img.dtype != np.uint8:
@@ -275,7 +287,7 @@ class FrameDiagnostics:
         var_lap = var_laplacian(img, step=2)
         score = blur_score(img, var_lap)
         blur = self._blur.update(score)
-        smear, advice = self._smear(t_ns, exposure_s)
+        smear, advice = self._smear(t_ns, exposure_s, motion)
         smear_flag = smear is not None and smear.max_px > cfg.smear_flag_px
         ex: Excitation | None = None
         if self._imu.t.size:
@@ -292,6 +304,8 @@ class FrameDiagnostics:
                 flag=bool(blur.is_blurred or smear_flag),
                 smear_px_pred=None if smear is None else smear.max_px,
                 smear_px_mean=None if smear is None else smear.mean_px,
+                smear_px_rotation=None if smear is None else smear.rotation_max_px,
+                smear_px_translation=None if smear is None else smear.translation_max_px,
                 max_exposure_s=advice,
             ),
             exposure=ExposureHealth(
