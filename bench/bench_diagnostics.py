@@ -157,19 +157,23 @@ def _accuracy_on_simulator() -> list[dict[str, object]]:
 
 
 def run(quick: bool) -> list[dict[str, object]]:
+    from threadpoolctl import threadpool_limits
+
     cv2.setNumThreads(1)
     n, repeats = (60, 3) if quick else (200, 5)
     frames = _frames(n)
-    be = float(np.median([_blur_exposure_ms(frames) for _ in range(repeats)]))
-    blur = float(np.median([
-        (lambda t0: (sum(blur_score(f) for f in frames), time.process_time() - t0)[1])(
-            time.process_time()) * 1e3 / n for _ in range(repeats)
-    ]))
-    st = float(np.median([_stage_ms(frames) for _ in range(repeats)]))
+    with threadpool_limits(limits=1):
+        be = float(np.median([_blur_exposure_ms(frames) for _ in range(repeats)]))
+        blur = float(np.median([
+            (lambda t0: (sum(blur_score(f) for f in frames), time.process_time() - t0)[1])(
+                time.process_time()) * 1e3 / n for _ in range(repeats)
+        ]))
+        st = float(np.median([_stage_ms(frames) for _ in range(repeats)]))
     return [
         {"name": "diagnostics blur+exposure throughput 752x480", "value": 1e3 / be,
-         "unit": "frames/s", "note": f"one core, {be:.2f} ms/frame, median of {repeats} x {n} frames"
-                                       " (target >= 400)"},
+         "unit": "frames/s", "note": f"one core (OpenCV and BLAS one thread), {be:.2f} ms/frame of "
+                                       f"CPU, median of {repeats} x {n} frames",
+         "target": ">= 400 frames/s", "pass": bool(1e3 / be >= 400.0)},
         {"name": "diagnostics blur score 752x480", "value": blur, "unit": "ms/frame",
          "note": "var of Laplacian, every 2nd row/col of the full-res Laplacian"},
         {"name": "FrameDiagnostics full stage 752x480 (no IMU)", "value": 1e3 / st,

@@ -35,6 +35,8 @@ F64 = NDArray[np.float64]
 
 
 NEAREST_TRACKS = 8  # tracked points that a grid point's inverse-depth plane is fitted to
+GRID_BORDER_PX = 8.0  # the smear is evaluated this far in from the image border (and beyond it no
+# feature is tracked, so no depth is known there)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -168,10 +170,11 @@ def integrate_gyro(
 
 
 def _grid(camera: CameraModel, grid: tuple[int, int]) -> F64:
-    """Cell centres of an ``nx`` x ``ny`` grid over the image (M, 2)."""
+    """An ``nx`` x ``ny`` grid (M, 2) over the image, ``GRID_BORDER_PX`` in from its edges."""
     nx, ny = grid
-    us = (np.arange(nx) + 0.5) * (camera.width / nx) - 0.5
-    vs = (np.arange(ny) + 0.5) * (camera.height / ny) - 0.5
+    m = min(GRID_BORDER_PX, 0.25 * (camera.width - 1), 0.25 * (camera.height - 1))
+    us = np.linspace(m, camera.width - 1.0 - m, nx)
+    vs = np.linspace(m, camera.height - 1.0 - m, ny)
     uu, vv = np.meshgrid(us, vs)
     return np.stack([uu.ravel(), vv.ravel()], axis=1)
 
@@ -180,8 +183,8 @@ def smear_field(
     camera: CameraModel, R_c0_c1: F64, grid: tuple[int, int] = (16, 12),
     t_c0_c1: F64 | None = None, motion: CameraMotion | None = None,
 ) -> tuple[F64, F64]:
-    """Pixel displacement of a camera motion ``(R_c0_c1, t_c0_c1)`` over a grid of cell centres
-    covering the image (the translation needs ``motion`` for the depths).
+    """Pixel displacement of a camera motion ``(R_c0_c1, t_c0_c1)`` over a grid covering the
+    image (the translation needs ``motion`` for the depths).
 
     Returns ``(uv0 (M, 2), disp_px (M,))``; points that leave the valid projection get NaN.
     """
