@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench lint clean
+.PHONY: demo test bench bench-quick lint clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -28,6 +28,11 @@ test: lint
 
 bench: $(STAMP)
 	$(BIN)/python -m bench.run --out bench/results
+
+# The headline figures (diagnostics throughput and truth) in under 5 minutes; the other sections
+# of bench/results keep their last full run.
+bench-quick: $(STAMP)
+	$(BIN)/python -m bench.run --out bench/results --quick --headline
 
 clean:
 	rm -rf $(VENV) demo_out .mypy_cache .pytest_cache .ruff_cache

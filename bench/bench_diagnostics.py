@@ -5,9 +5,10 @@ do not depend on the load of a shared machine.
 
 - ``blur+exposure``: per frame, the scene-normalised blur score (``blur_score``: Var of the 3x3 Laplacian over Var(I),
   evaluated on every 2nd row/column of the full-resolution Laplacian) and the exposure change to
-  the previous frame (contrast-normalised image, pyramidal KLT (3 levels, 11 px window) of up to 100
-  tracks, robust affine fit on 7x7 patches of the 9x9 box-filtered frames; features re-detected
-  when fewer than 40 survive, amortised in the figure).
+  the previous frame (histogram quantiles, the previous frame mapped into the current brightness,
+  pyramidal KLT (3 levels, 11 px window) of up to 100 tracks, clip-aware robust symmetric gain
+  fit on 7x7 patches of the 9x9 box-filtered frames; features re-detected when fewer than 40
+  survive, amortised in the figure).
 - ``FrameDiagnostics``: the whole stage (adds saturation counts, parallax with the essential
   matrix since no IMU is given, keyframing), for reference.
 
@@ -28,15 +29,20 @@ from amrvio.diagnostics.blur import BlurScorer, blur_score
 from amrvio.diagnostics.exposure import (
     ExposureConfig,
     ExposureFrame,
-    TrackingConfig,
-    detection_mask,
     fit_exposure_frames,
     prepare_exposure_frame,
 )
 from amrvio.diagnostics.frame import FrameDiagnostics
 from amrvio.diagnostics.parallax import ParallaxReferenceConfig
+from amrvio.diagnostics.tracks import (
+    TrackFrame,
+    TrackingConfig,
+    detection_mask,
+    prepare_track_frame,
+    track_between,
+)
 from amrvio.tracking.detect import detect_corners
-from amrvio.tracking.lk import LkTracker, TrackImage
+from amrvio.tracking.lk import LkTracker
 from amrvio.types.camera import PinholeCamera
 
 W, H = 752, 480
@@ -63,18 +69,18 @@ def _blur_exposure_ms(frames: list[NDArray[np.uint8]]) -> float:
     scorer = BlurScorer()
     t0 = time.process_time()
     prev: ExposureFrame | None = None
-    prev_t: TrackImage | None = None
+    prev_t: TrackFrame | None = None
     pts = np.zeros((0, 2))
     for img in frames:
         scorer.update(blur_score(img))
-        cur = tracker.prepare(img)
+        cur = prepare_track_frame(tracker, img)
         ef = prepare_exposure_frame(img, ecfg)
         if prev is not None and prev_t is not None:
-            res = tracker.track(prev_t, cur, pts)
+            res = track_between(tracker, prev_t, cur, pts)
             fit_exposure_frames(prev, ef, pts[res.ok], res.pts[res.ok], ecfg)
             pts = res.pts[res.ok]
         if pts.shape[0] < min_tracks:
-            pts = detect_corners(cur.lk, tcfg.detector, mask=detection_mask(ef))
+            pts = detect_corners(cur.image.lk, tcfg.detector, mask=detection_mask(ef.bad))
         prev, prev_t = ef, cur
     return (time.process_time() - t0) * 1e3 / len(frames)
 
@@ -151,19 +157,23 @@ def _accuracy_on_simulator() -> list[dict[str, object]]:
 
 
 def run(quick: bool) -> list[dict[str, object]]:
+    from threadpoolctl import threadpool_limits
+
     cv2.setNumThreads(1)
     n, repeats = (60, 3) if quick else (200, 5)
     frames = _frames(n)
-    be = float(np.median([_blur_exposure_ms(frames) for _ in range(repeats)]))
-    blur = float(np.median([
-        (lambda t0: (sum(blur_score(f) for f in frames), time.process_time() - t0)[1])(
-            time.process_time()) * 1e3 / n for _ in range(repeats)
-    ]))
-    st = float(np.median([_stage_ms(frames) for _ in range(repeats)]))
+    with threadpool_limits(limits=1):
+        be = float(np.median([_blur_exposure_ms(frames) for _ in range(repeats)]))
+        blur = float(np.median([
+            (lambda t0: (sum(blur_score(f) for f in frames), time.process_time() - t0)[1])(
+                time.process_time()) * 1e3 / n for _ in range(repeats)
+        ]))
+        st = float(np.median([_stage_ms(frames) for _ in range(repeats)]))
     return [
         {"name": "diagnostics blur+exposure throughput 752x480", "value": 1e3 / be,
-         "unit": "frames/s", "note": f"one core, {be:.2f} ms/frame, median of {repeats} x {n} frames"
-                                       " (target >= 400)"},
+         "unit": "frames/s", "note": f"one core (OpenCV and BLAS one thread), {be:.2f} ms/frame of "
+                                       f"CPU, median of {repeats} x {n} frames",
+         "target": ">= 400 frames/s", "pass": bool(1e3 / be >= 400.0)},
         {"name": "diagnostics blur score 752x480", "value": blur, "unit": "ms/frame",
          "note": "var of Laplacian, every 2nd row/col of the full-res Laplacian"},
         {"name": "FrameDiagnostics full stage 752x480 (no IMU)", "value": 1e3 / st,

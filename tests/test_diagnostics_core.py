@@ -134,11 +134,15 @@ def test_exposure_change_klt_under_motion() -> None:
     assert ch.ev == pytest.approx(np.log2(0.8), abs=0.05)
     same = fit_exposure_same_pixel(img, cur)
     assert abs(same.a - 0.8) > abs(ch.a - 0.8)  # the same pixel is wrong under motion
-    # with an offset, EV is the gain at the median intensity (robust to the a/b trade-off)
+    # with an offset (a black level: y - o = k (x - o)), EV is log2(a), the offset fitted apart;
+    # ev_median is the brightness ratio at the median intensity
     cur_b = np.clip(np.round(0.8 * moved.astype(np.float64) + 6), 0, 255).astype(np.uint8)
     chb = estimate_exposure_change(img, cur_b)
     m = chb.fit.x_median
-    assert chb.ev == pytest.approx(np.log2((0.8 * m + 6) / m), abs=0.05)
+    assert chb.ev == pytest.approx(np.log2(0.8), abs=0.03)
+    assert chb.b == pytest.approx(6.0, abs=1.5)
+    assert chb.ev_median == pytest.approx(np.log2((chb.a * m + chb.b) / m), abs=1e-9)
+    assert chb.flag
 
 
 def test_exposure_change_blur_is_not_an_exposure_step() -> None:

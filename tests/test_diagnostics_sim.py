@@ -60,8 +60,9 @@ def test_gyro_predicted_smear_matches_true_smear(
     R = integrate_gyro(stamps, gyro, int((t_mid - exposure_s / 2) * 1e9),
                        int((t_mid + exposure_s / 2) * 1e9), R_cam_body=R_body_cam.T)
     assert float(np.nanmax(smear_at_pixels(camera, R, uv))) == pytest.approx(true_max, rel=0.10)
-    # and the full-grid max (includes the corner pixels) is at least that
-    assert pred.max_px >= 0.95 * true_max
+    # and the prediction's grid max, 8 px in from the border, is within the truth that reaches
+    # 4 px in (under strong distortion the corners smear most)
+    assert 0.9 * true_max <= pred.max_px <= 1.02 * true_max
 
 
 def _diagnose(seq: Path) -> list[tuple[float, bool, float]]:

@@ -9,7 +9,8 @@ Blur: ``blur.var_lap`` is the seed's Var(Delta I) of the raw image. The scene-no
 ``blur.ratio`` divides the contrast-normalised :func:`~amrvio.diagnostics.blur.blur_score` (the
 VO's), Var(Delta I) / Var(I), by the median of recent sharp frames: an exposure step scales both
 variances by a^2, so it does not read as blur. ``blur.flag`` is set when that ratio is low or
-when the gyro-predicted smear exceeds ``smear_flag_px``.
+when the predicted smear (rotation from the gyro, plus translation when the caller passes a
+:class:`~amrvio.diagnostics.smear.CameraMotion`) exceeds ``smear_flag_px``.
 """
 
 from __future__ import annotations
@@ -25,13 +26,10 @@ from amrvio.diagnostics.exposure import (
     ExposureChange,
     ExposureConfig,
     ExposureFrame,
-    TrackingConfig,
-    detection_mask,
-    fit_exposure_frames,
     fit_exposure_same_pixel,
+    fit_exposure_tracked,
     prepare_exposure_frame,
     saturated_fraction,
-    tracker_mask,
 )
 from amrvio.diagnostics.health import (
     EXCITATION_COLUMNS,
@@ -50,14 +48,24 @@ from amrvio.diagnostics.parallax import (
     parallax_reference_due,
 )
 from amrvio.diagnostics.smear import (
+    CameraMotion,
     SmearPrediction,
     integrate_gyro,
     max_exposure_for_smear,
     predict_smear,
+    predict_smear_from_rates,
+)
+from amrvio.diagnostics.tracks import (
+    TrackFrame,
+    TrackingConfig,
+    detection_mask,
+    prepare_track_frame,
+    track_between,
+    tracker_mask,
 )
 from amrvio.errors import ShapeError
 from amrvio.tracking.detect import detect_corners
-from amrvio.tracking.lk import LkTracker, TrackImage
+from amrvio.tracking.lk import LkTracker
 from amrvio.types.camera import CameraModel, PinholeCamera
 from amrvio.types.lie import SE3
 from amrvio.types.sensors import ImuData
@@ -101,7 +109,7 @@ class _Previous:
     """What the stage keeps of the previous frame."""
 
     image: U8
-    track: TrackImage
+    track: TrackFrame
     exposure: ExposureFrame
     t_ns: int
 
@@ -174,26 +182,32 @@ class FrameDiagnostics:
         h, w = shape
         return PinholeCamera(w, h, float(w), float(w), (w - 1) / 2.0, (h - 1) / 2.0)
 
-    def _smear(self, t_ns: int, exposure_s: float | None) -> tuple[SmearPrediction | None, float | None]:
+    def _smear(self, t_ns: int, exposure_s: float | None, motion: CameraMotion | None,
+               ) -> tuple[SmearPrediction | None, float | None]:
         T = exposure_s if exposure_s is not None else self.config.assumed_exposure_s
-        if self.camera is None or T is None or self._imu.t.size < 2:
+        if self.camera is None or T is None:
             return None, None
-        if t_ns - int(T * 0.5e9) < self._imu.t[0] or t_ns + int(T * 0.5e9) > self._imu.t[-1] + 20_000_000:
+        imu_t = self._imu.t
+        covered = (imu_t.size >= 2 and t_ns - int(T * 0.5e9) >= imu_t[0]
+                   and t_ns + int(T * 0.5e9) <= imu_t[-1] + 20_000_000)
+        if covered:
+            pred = predict_smear(self.camera, imu_t, self._imu.g, t_ns, T, self.R_cam_body,
+                                 self.gyro_bias, motion=motion)
+        elif motion is not None and motion.omega_cam_rad_s is not None:
+            pred = predict_smear_from_rates(self.camera, motion, T)
+        else:
             return None, None
-        pred = predict_smear(
-            self.camera, self._imu.t, self._imu.g, t_ns, T, self.R_cam_body, self.gyro_bias
-        )
         advice = None
         if pred.max_px > self.config.smear_bound_px:
-            advice = max_exposure_for_smear(
-                self.camera, pred.omega_cam_rad_s, self.config.smear_bound_px
-            )
+            advice = max_exposure_for_smear(self.camera, pred.omega_cam_rad_s,
+                                            self.config.smear_bound_px, motion=motion)
         return pred, advice
 
-    def _new_reference(self, track: TrackImage, expo_frame: ExposureFrame) -> None:
-        mask = tracker_mask(detection_mask(expo_frame), track.lk.shape, track.levels)
-        pts = detect_corners(track.lk, self.config.tracking.detector, mask=mask)
-        self._ref.restart(np.asarray(pts * track.scale, dtype=np.float32))
+    def _new_reference(self, track: TrackFrame, expo_frame: ExposureFrame) -> None:
+        t = track.image
+        mask = tracker_mask(detection_mask(expo_frame.bad), t.lk.shape, t.levels)
+        pts = detect_corners(t.lk, self.config.tracking.detector, mask=mask)
+        self._ref.restart(np.asarray(pts * t.scale, dtype=np.float32))
 
     def _gyro_rotation(self, prev_t: int, t_ns: int) -> F64 | None:
         """Gyro rotation prev -> cur (camera frame), None when the reference lost it or the IMU
@@ -204,19 +218,19 @@ class FrameDiagnostics:
             return None
         return integrate_gyro(imu_t, self._imu.g, prev_t, t_ns, self.R_cam_body, self.gyro_bias)
 
-    def _track(self, prev: _Previous, track: TrackImage, img: U8, expo_frame: ExposureFrame,
+    def _track(self, prev: _Previous, track: TrackFrame, img: U8, expo_frame: ExposureFrame,
                t_ns: int) -> tuple[ExposureChange, float, RotationSource, bool]:
         """Track from the previous frame: the exposure change, the parallax (px) and its
         rotation source, and whether this frame became the parallax reference."""
         cfg, ref = self.config, self._ref
         ref.rotate(self._gyro_rotation(prev.t_ns, t_ns))
-        res = self._tracker.track(prev.track, track, ref.pts)
+        res = track_between(self._tracker, prev.track, track, ref.pts)
         ok = res.ok
         pts1 = np.asarray(res.pts, dtype=np.float32)
         n_ok = int(ok.sum())
-        if n_ok >= cfg.exposure.min_tracks:
-            expo = fit_exposure_frames(prev.exposure, expo_frame, ref.pts[ok], pts1[ok], cfg.exposure)
-        else:
+        expo = fit_exposure_tracked(self._tracker, (prev.track, track), (prev.exposure, expo_frame),
+                                    ref.pts[ok], pts1[ok], cfg.exposure, cfg.tracking.detector)
+        if expo is None:
             expo = fit_exposure_same_pixel(prev.image, img, cfg.exposure, self.inverse_response)
         ref.advance(pts1, ok)
         par = ref.measure(self._camera_for(img.shape[:2]))
@@ -232,11 +246,15 @@ class FrameDiagnostics:
         imu_window: ImuData | None = None,
         exposure_s: float | None = None,
         frame_index: int | None = None,
+        motion: CameraMotion | None = None,
     ) -> FrameHealth:
         """Diagnose one (H, W) uint8 grey frame taken at ``t_ns`` (mid-exposure).
 
         ``imu_window``: IMU samples since the previous call, reaching at least to the end of this
         frame's exposure (overlaps are ignored). ``exposure_s``: the frame's exposure time if known.
+        ``motion``: the camera's velocity and the depths of tracked points when the caller knows
+        them (VIO, VO with scale, or a wheel odometer); the predicted smear then includes the
+        translational part, else it is the rotational part alone.
         """
         img = np.asarray(frame_image)
         if img.ndim != 2 or img.dtype != np.uint8:
@@ -252,7 +270,7 @@ class FrameDiagnostics:
         if imu_window is not None:
             self._imu.add(imu_window)
 
-        track = self._tracker.prepare(img)
+        track = prepare_track_frame(self._tracker, img)
         expo_frame = prepare_exposure_frame(img, cfg.exposure, self.inverse_response)
         expo: ExposureChange | None = None
         parallax = float("nan")
@@ -269,7 +287,7 @@ class FrameDiagnostics:
         var_lap = var_laplacian(img, step=2)
         score = blur_score(img, var_lap)
         blur = self._blur.update(score)
-        smear, advice = self._smear(t_ns, exposure_s)
+        smear, advice = self._smear(t_ns, exposure_s, motion)
         smear_flag = smear is not None and smear.max_px > cfg.smear_flag_px
         ex: Excitation | None = None
         if self._imu.t.size:
@@ -286,6 +304,8 @@ class FrameDiagnostics:
                 flag=bool(blur.is_blurred or smear_flag),
                 smear_px_pred=None if smear is None else smear.max_px,
                 smear_px_mean=None if smear is None else smear.mean_px,
+                smear_px_rotation=None if smear is None else smear.rotation_max_px,
+                smear_px_translation=None if smear is None else smear.translation_max_px,
                 max_exposure_s=advice,
             ),
             exposure=ExposureHealth(

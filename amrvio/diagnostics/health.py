@@ -15,9 +15,12 @@ class BlurHealth:
     """``var_lap``: the seed's Var(Delta I) of the raw image; ``score``: the contrast-normalised
     :func:`~amrvio.diagnostics.blur.blur_score`; ``ratio``: the scene-normalised
     :func:`~amrvio.diagnostics.blur.blur_score` over recent sharp frames; ``flag``: ratio low or
-    predicted smear above the flag level. ``smear_px_pred``/``smear_px_mean``: gyro-predicted
-    smear (max / mean over the image); ``max_exposure_s``: the longest exposure keeping the
-    predicted smear under the bound at the current rate (only when the bound is exceeded)."""
+    predicted smear above the flag level. ``smear_px_pred``/``smear_px_mean``: predicted smear
+    (max / mean over the image), rotation from the gyro plus translation when the camera's motion
+    was given; ``smear_px_rotation``/``smear_px_translation``: the max of each part alone
+    (translation None when the motion was not given); ``max_exposure_s``: the longest exposure
+    keeping the predicted smear under the bound at the current motion (only when the bound is
+    exceeded)."""
 
     var_lap: float
     score: float
@@ -26,6 +29,8 @@ class BlurHealth:
     smear_px_pred: float | None = None
     smear_px_mean: float | None = None
     max_exposure_s: float | None = None
+    smear_px_rotation: float | None = None
+    smear_px_translation: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,6 +95,8 @@ class FrameHealth:
             "blur_ratio": f(b.ratio, 4),
             "smear_px_pred": f(b.smear_px_pred, 4),
             "smear_px_mean": f(b.smear_px_mean, 4),
+            "smear_px_rot": f(b.smear_px_rotation, 4),
+            "smear_px_trans": f(b.smear_px_translation, 4),
             "blur_flag": str(int(b.flag)),
             "exposure_s": f(e.exposure_s),
             "max_exposure_s": f(b.max_exposure_s, 4),
@@ -117,7 +124,8 @@ class FrameHealth:
 
 
 HEALTH_COLUMNS: tuple[str, ...] = (
-    "t_s", "frame", "blur_var_lap", "blur_ratio", "smear_px_pred", "smear_px_mean", "blur_flag",
+    "t_s", "frame", "blur_var_lap", "blur_ratio", "smear_px_pred", "smear_px_mean", "smear_px_rot",
+    "smear_px_trans", "blur_flag",
     "exposure_s", "max_exposure_s", "gain_a", "offset_b", "exposure_ev", "exposure_flag",
     "exposure_method", "saturated_frac", "underexposed_frac", "parallax_px", "low_parallax_flag",
     "n_tracks", "rotation_source", "keyframe",

@@ -33,6 +33,7 @@ class AffineStatus(enum.Enum):
     OK = "ok"
     TOO_FEW_SAMPLES = "too_few_samples"
     NO_CONTRAST = "no_contrast"
+    UNCORRELATED = "uncorrelated"  # the two sample sets do not look like one scene
 
 
 @dataclass(frozen=True, slots=True)

@@ -74,11 +74,13 @@ def affine_from_quantiles(qr: NDArray[np.float64], qc: NDArray[np.float64]) -> A
     ok = (qr > 2) & (qr < 253) & (qc > 2) & (qc < 253)
     if int(ok.sum()) < 3 or float(np.ptp(qr[ok])) < 1.0:
         return AffineBrightness()
-    A = np.column_stack([qr[ok], np.ones(int(ok.sum()))])
-    (a, b), *_ = np.linalg.lstsq(A, qc[ok], rcond=None)
+    x, y = qr[ok], qc[ok]
+    dx = x - x.mean()  # least squares in closed form (lstsq costs ten times more per frame)
+    a = float(dx @ (y - y.mean())) / float(dx @ dx)
+    b = float(y.mean()) - a * float(x.mean())
     if not np.isfinite(a) or a <= 0.05:
         return AffineBrightness()
-    return AffineBrightness(float(a), float(b))
+    return AffineBrightness(a, b)
 
 
 def normalise_for_tracking(image: U8) -> U8:

@@ -1,0 +1,30 @@
+"""The figures that open bench/results/results.md, with their targets.
+
+A benchmark row that carries ``"target"`` (text) and ``"pass"`` (bool) is a headline by itself
+(bench_diagnostics, bench_diag_truth). The rows below come from modules that state their goal in
+the note only; they are listed here with the goal, so that the headline table can judge them.
+A listed row that a run did not produce shows as missing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, slots=True)
+class Headline:
+    section: str
+    name: str
+    target: str
+    passes: Callable[[float], bool]
+
+
+HEADLINES: tuple[Headline, ...] = (
+    Headline("bench_vo", "kitti00 0-199 Sim3 ATE / path", "<= 0.65 % (ORB-SLAM3 mono)",
+             lambda v: v <= 0.65),
+    Headline("bench_vo", "kitti00 --camera-height 1.65 scale error |1-s|", "<= 3 %",
+             lambda v: v <= 3.0),
+    Headline("bench_vo", "sim corridor forward-stop-turn 752x480 [full] Sim3 ATE / path",
+             "<= 0.5 %", lambda v: v <= 0.5),
+)
