@@ -339,10 +339,32 @@ class Pipeline:
         if not reloc.ok or reloc.T_cam_world is None:
             events.append(f"reloc_failed:{reloc.status.value}:{reloc.n_matches}:{reloc.n_inliers}")
             return None
+        far = self._implausible_jump(segment, reloc.T_cam_world)
+        if far is not None:
+            # a repeated structure (shelves, posters) can look like the place: a pose farther
+            # from the last known one than the robot could have gone is refused
+            events.append(f"reloc_rejected:jump={far:.3g}")
+            self.recovery.lost(segment)
+            return None
         if rep is None:
             rep = self.tracker.started_report()
         return self._relocalised(len(self.records), img, reloc.T_cam_world, reloc.point_ids,
                                  reloc.uv, rep, events)
+
+    def _implausible_jump(self, segment: int, T_cam_world: F64) -> float | None:
+        """The distance (global units) from the last known pose when it exceeds three times
+        what the recent speed covers in the frames since that pose (at least 5 frames' worth),
+        else None."""
+        T_last = self.tracker.motion.T_last
+        if T_last is None:
+            return None
+        since = next((k for k, r in enumerate(reversed(self.records))
+                      if r.status is PoseStatus.TRACKED), len(self.records)) + 1
+        c_new = -T_cam_world[:3, :3].T @ T_cam_world[:3, 3]
+        c_old = -T_last[:3, :3].T @ T_last[:3, 3]
+        dist = float(np.linalg.norm(c_new - c_old)) * self.mapping.segments[segment].world_from_segment.s
+        bound = 3.0 * self.tracker.motion.typical_speed() * max(since, 5)
+        return dist if dist > bound else None
 
     def _relocalised(self, index: int, img: U8, T_cam_world: F64, ids: NDArray[np.int64],
                      uv: F64, rep: TrackingReport, events: list[str]) -> _Step:
