@@ -25,6 +25,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write into a non-empty --out (the files of an earlier run are "
                              "removed first; other files are left alone)")
     parser.add_argument("--calib", type=Path, default=None, help="override the calibration file")
+    add_config_arguments(parser)
+    parser.add_argument("--progress", action="store_true",
+                        help="show the progress bar and the live health line on stderr even when "
+                             "it is not a terminal (default: only on a terminal)")
+    parser.add_argument("--no-report", action="store_true", help="do not write report.html")
+    parser.add_argument("--bag-out", type=Path, default=None, metavar="FOLDER",
+                        help="also write the trajectory as a ROS 2 bag (nav_msgs/Odometry on "
+                             "/amrvio/odometry, rosbag2 format 8), a new folder")
+
+
+def add_config_arguments(parser: argparse.ArgumentParser) -> None:
+    """--config and the options that override it, and --max-frames (``run`` and ``batch``)."""
     parser.add_argument("--config", type=Path, default=None, metavar="FILE.yaml",
                         help="pipeline configuration (keys = field names; `amrvio config --dump` "
                              "prints the defaults); the options below override it")
@@ -46,18 +58,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=seed_int, default=None,
                         help=f"seed of every random choice, in {interval(*SEED_RANGE)} "
                              "(default 0; config: seed)")
-    add_output_arguments(parser)
-
-
-def add_output_arguments(parser: argparse.ArgumentParser) -> None:
-    """--progress, --no-report and --bag-out (shared with ``amrvio batch`` but --bag-out)."""
-    parser.add_argument("--progress", action="store_true",
-                        help="show the progress bar and the live health line on stderr even when "
-                             "it is not a terminal (default: only on a terminal)")
-    parser.add_argument("--no-report", action="store_true", help="do not write report.html")
-    parser.add_argument("--bag-out", type=Path, default=None, metavar="FOLDER",
-                        help="also write the trajectory as a ROS 2 bag (nav_msgs/Odometry on "
-                             "/amrvio/odometry), a new folder")
 
 
 def build_config(args: argparse.Namespace) -> object:

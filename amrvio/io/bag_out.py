@@ -48,9 +48,9 @@ def body_twist(stamps_ns: ArrayLike, T_world_cam: ArrayLike) -> tuple[F64, F64]:
     """(N, 3) linear and (N, 3) angular velocity of each pose, in its own (child) frame, from
     the neighbouring poses: v = R_i^T (p_b - p_a) / (t_b - t_a), w = log(R_a^T R_b) / (t_b - t_a)
     with a, b = i-1, i+1 (i, i+1 at the start, i-1, i at the end). Zero for a single pose."""
-    t = np.asarray(stamps_ns, dtype=np.float64) * 1e-9
+    t_ns = np.asarray(stamps_ns, dtype=np.int64)
     T = np.asarray(T_world_cam, dtype=np.float64)
-    n = len(t)
+    n = len(t_ns)
     if T.shape != (n, 4, 4):
         raise ShapeError(f"T_world_cam must be ({n}, 4, 4), got {T.shape}")
     v = np.zeros((n, 3))
@@ -59,7 +59,8 @@ def body_twist(stamps_ns: ArrayLike, T_world_cam: ArrayLike) -> tuple[F64, F64]:
         return v, w
     a = np.clip(np.arange(n) - 1, 0, n - 1)
     b = np.clip(np.arange(n) + 1, 0, n - 1)
-    dt = t[b] - t[a]
+    dt = (t_ns[b] - t_ns[a]) * 1e-9  # differences of integers: seconds since 1970 in a
+    # float64 keep only ~0.2 us
     R, p = T[:, :3, :3], T[:, :3, 3]
     v_world = (p[b] - p[a]) / dt[:, None]
     v = np.einsum("nji,nj->ni", R, v_world)
@@ -81,14 +82,23 @@ def write_odometry_bag(path: Path, stamps_ns: ArrayLike, T_world_cam: ArrayLike,
     q = matrix_to_quat_wxyz(T[:, :3, :3]).reshape(-1, 4) if len(T) else np.zeros((0, 4))
     ts = get_typestore(Stores.ROS2_HUMBLE)
     try:
-        _write(Writer(path, version=BAG_VERSION), ts, stamps, T, q, v, w, topic, frame_id,
-               child_frame_id)
+        _write(_writer(Writer, path), ts, stamps, T, q, v, w, topic, frame_id, child_frame_id)
     except BaseException:  # a bag half written is no bag: remove it (Ctrl-C included)
         import shutil
 
         shutil.rmtree(path, ignore_errors=True)
         raise
     return len(stamps)
+
+
+def _writer(cls: Any, path: Path) -> Any:
+    """rosbags' Writer at format :data:`BAG_VERSION` (rosbags >= 0.11 asks for it; earlier
+    versions write their own latest format)."""
+    import inspect
+
+    if "version" in inspect.signature(cls.__init__).parameters:
+        return cls(path, version=BAG_VERSION)
+    return cls(path)
 
 
 def _write(writer: Any, ts: Any, stamps: I64, T: F64, q: F64, v: F64, w: F64, topic: str,
