@@ -275,3 +275,16 @@ def test_eval_json_says_why_without_a_usable_ground_truth(tmp_path: Path) -> Non
     expect = ds.groundtruth.positions_m + np.einsum("nij,j->ni", ds.groundtruth.rotations(), ds.T_body_cam.t)
     np.testing.assert_allclose(gt.positions_m, expect, atol=1e-12)
     assert not math.isnan(float(gt.positions_m.sum()))
+
+
+def test_demo_camera_height_and_table(run_dir: Path, tiny_sim: Path) -> None:
+    from amrvio.demo import camera_height_m, summary_table
+
+    p, _ = _camera_gt(tiny_sim)
+    assert camera_height_m(tiny_sim) == pytest.approx(p[0, 2], abs=1e-9)  # the floor is z = 0
+    summary = json.loads((run_dir / "summary.json").read_text())
+    ev = json.loads((run_dir / "eval.json").read_text())
+    rows = dict(summary_table(summary, ev, 0.7, 10.0, 20.0))
+    assert rows["frames"].startswith(f"{summary['n_frames']} ({summary['n_in_trajectory']} with a pose")
+    assert rows["ATE, Sim3 aligned"].startswith(f"{ev['ate_sim3_m']:.3f} m")
+    assert rows["wall time"] == f"simulate 10 s, run 20 s ({summary['n_frames'] / 20:.1f} frames/s)"

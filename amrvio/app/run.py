@@ -15,6 +15,7 @@ For images of your own, feed :class:`amrvio.pipeline.pipeline.Pipeline` frame by
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -107,6 +108,7 @@ class _Skips:
 def run(dataset: str | Path | Dataset, config: ConfigLike = None, *, out: str | Path | None = None,
         calib: str | Path | None = None, max_frames: int | None = None, force: bool = False,
         progress: bool = False, report: bool = True, bag_out: str | Path | None = None,
+        gt: str | Path | None = None, gt_frame: str = "cam",
         stop: Callable[[], bool] | None = None) -> RunResult:
     """Run the pipeline on ``dataset`` (a Dataset, or a spec such as ``euroc:PATH`` or a bare
     folder) and evaluate it against its ground truth.
@@ -114,8 +116,10 @@ def run(dataset: str | Path | Dataset, config: ConfigLike = None, *, out: str | 
     ``out``: write the output folder there (checked before any work; a non-empty one needs
     ``force``). ``progress``: a progress bar with a live health line on stderr. ``report``:
     write report.html (with ``out``). ``bag_out``: a ROS 2 bag folder (must not exist) with the
-    trajectory as nav_msgs/Odometry. ``stop()`` is asked before each frame; True ends the run
-    there (the outputs cover the frames done and say the run was interrupted).
+    trajectory as nav_msgs/Odometry. ``gt``: a ground-truth file (TUM, EuRoC CSV or KITTI
+    poses) that replaces the dataset's own, of the camera (``gt_frame="cam"``) or of the body
+    (``"body"``: times the dataset's T_body_cam). ``stop()`` is asked before each frame; True ends
+    the run there (the outputs cover the frames done and say the run was interrupted).
     Bad input is an :class:`~amrvio.errors.AmrvioError` naming the file and the problem.
     """
     from amrvio.diagnostics.advice import make_advice
@@ -133,8 +137,17 @@ def run(dataset: str | Path | Dataset, config: ConfigLike = None, *, out: str | 
         from amrvio.io.bag_out import check_bag_path
 
         check_bag_path(bag_path)
+    if gt_frame not in ("cam", "body"):
+        raise ConfigError(f"gt_frame must be cam or body, got {gt_frame!r}")
+    gt_traj = None
+    if gt is not None:
+        from amrvio.io.trajectory import read_trajectory
+
+        gt_traj = read_trajectory(gt)
     ds = dataset if isinstance(dataset, Dataset) else open_dataset(
         str(dataset), Path(calib) if calib is not None else None)
+    if gt_traj is not None:
+        ds = dataclasses.replace(ds, groundtruth=gt_traj, groundtruth_frame=gt_frame)
     setup = setup_diagnostics(ds, cfg.diagnostics) if cfg.diagnose else None
     notes = setup.notes if setup is not None else ()
     n_planned = min(len(ds.frames), max_frames or len(ds.frames))

@@ -25,6 +25,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write into a non-empty --out (the files of an earlier run are "
                              "removed first; other files are left alone)")
     parser.add_argument("--calib", type=Path, default=None, help="override the calibration file")
+    parser.add_argument("--gt", type=Path, default=None, metavar="FILE",
+                        help="ground truth for eval.json (TUM, EuRoC CSV or KITTI poses), "
+                             "replacing the dataset's own")
+    parser.add_argument("--gt-frame", choices=("cam", "body"), default="cam",
+                        help="--gt holds camera poses (default) or body poses (then times the "
+                             "dataset's camera-body transform)")
     add_config_arguments(parser)
     parser.add_argument("--progress", action="store_true",
                         help="show the progress bar and the live health line on stderr even when "
@@ -107,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
         res = run_recording(args.dataset, cfg, out=args.out, calib=args.calib,
                             max_frames=args.max_frames, force=args.force,
                             progress=show_progress(args), report=not args.no_report,
-                            bag_out=args.bag_out, stop=stop)
+                            bag_out=args.bag_out, gt=args.gt, gt_frame=args.gt_frame,
+                            stop=stop)
     summary = res.summary
     if res.interrupted:
         print(f"amrvio run: interrupted after {summary['n_frames']} frames; partial outputs in "

@@ -98,6 +98,10 @@ def evaluate_run(dataset: Dataset, out: PipelineOutput,
         "metric_scale_source": "camera_height" if metric else None,
         "error": None, "sim3": None, "se3": None,
     }
+    if len(est) == 0:
+        summary["error"] = ("no frame has a pose (the run never initialised)" if not inside.size
+                            else "no posed frame lies in the ground truth's time span")
+        return RunEvaluation(summary, None, None)
     try:
         gt_at = gt.interpolated_at(est.stamps_s) if len(gt) >= 2 else gt
         sim3 = evaluate(est, gt_at, align="sim3", max_diff_s=MAX_DIFF_S)
