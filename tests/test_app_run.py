@@ -181,6 +181,22 @@ def test_report_html_is_self_contained_with_every_plot(run_dir: Path) -> None:
     cfg = config_from_dict(yaml.safe_load("".join(page.pre)))
     assert config_to_dict(cfg) == summary["config"]
     assert cfg.scale.camera_height_m == HEIGHT
+    # where a Chromium is installed (Debian's chromium on developer machines): the browser
+    # decodes every plot at the size of the PNG
+    from tests.browser_check import find_browser, render
+
+    browser = find_browser()
+    if browser is not None:
+        shown = render(run_dir / "report.html", browser)
+        assert shown.n_ok == shown.n_images == len(PLOTS)
+        sizes = {}
+        for img in page.imgs:
+            raw = base64.b64decode((img["src"] or "").partition(",")[2])
+            pix = cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_COLOR)
+            assert pix is not None
+            h, w = pix.shape[:2]
+            sizes[img["data-plot"]] = (w, h)
+        assert shown.plots == sizes
 
 
 def test_bag_reads_back_as_the_trajectory(run_dir: Path) -> None:

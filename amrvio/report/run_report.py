@@ -107,14 +107,21 @@ def _series(records: Sequence[FrameRecord], path: str) -> F64:
 
 
 def _finish(fig: Figure, axes: list[Axes], title: str) -> str:
+    """Axis label, grids, the title, and one legend for all axes on the right."""
     axes[-1].set_xlabel("time [s]")
+    handles: list[Any] = []
+    labels: list[str] = []
     for ax in axes:
         ax.grid(alpha=0.3)
-    handles, labels = axes[0].get_legend_handles_labels()
-    if handles:
-        axes[0].legend(handles, labels, loc="upper right", fontsize=7, ncol=4)
+        h, lab = ax.get_legend_handles_labels()
+        handles += h
+        labels += lab
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    right = 0.8 if handles else 1.0
+    if handles:
+        fig.legend(handles, labels, loc="upper left", bbox_to_anchor=(right, 0.9), fontsize=7,
+                   frameon=False)
+    fig.tight_layout(rect=(0.0, 0.0, right, 1.0))
     return _png(fig)
 
 
@@ -249,35 +256,43 @@ def plot_tracks(data: ReportInput, t: F64, ranges: dict[str, list[tuple[int, int
 
 
 def plot_scale(data: ReportInput, t: F64, ranges: dict[str, list[tuple[int, int]]]) -> str:
+    """Top: the metric scale applied to the map (camera height) and each keyframe's reading;
+    below: the Sim3 scale of the estimate to the ground truth over windows of the path (1: the
+    scale is right). Either alone when only it exists."""
     out = data.output
-    fig, (ax,) = _figure()
-    _shade(ax, t, ranges, True)
-    drawn = False
+    res = data.sim3
+    windows = [w for w in res.drift_windows if w.scale is not None] if res is not None else []
+    panels = int(bool(out.height_readings)) + int(bool(windows))
+    fig, axes = _figure(max(1, panels), 2.2)
+    for k, ax in enumerate(axes):
+        _shade(ax, t, ranges, k == 0)
+    if not panels:
+        _no_data(axes[0], "no scale source and no ground truth: monocular scale is arbitrary")
+        axes[0].set_ylabel("scale")
+    k = 0
     if out.height_readings:
+        ax = axes[k]
+        k += 1
         fs = np.asarray(out.frame_scale, dtype=np.float64)
         if fs.size == t.size:
-            ax.plot(t, fs, lw=1.2, color="tab:blue", label="scale applied (camera height)")
+            ax.plot(t, fs, lw=1.2, color="tab:blue", label="scale applied")
         pos = {r.index: i for i, r in enumerate(out.records)}
         hi = [(t[pos[h.frame_index]], h.scale) for h in out.height_readings
               if h.frame_index in pos and math.isfinite(h.scale)]
         if hi:
             ax.plot(*zip(*hi, strict=True), ".", color="tab:orange", ms=4,
                     label="keyframe ground-plane reading")
-        drawn = True
-    res = data.sim3
-    if res is not None:
+        ax.set_ylabel("m per map unit")
+    if windows and res is not None:
+        ax = axes[k]
         t0 = float(out.records[0].t_ns) * 1e-9 if out.records else 0.0
-        label = "Sim3 scale to ground truth, per window"
-        for w in res.drift_windows:
-            if w.scale is not None:
-                ax.plot([w.t_start_s - t0, w.t_end_s - t0], [w.scale, w.scale], "-",
-                        color="tab:red", lw=2, label=label)
-                label = ""
-                drawn = True
-    if not drawn:
-        _no_data(ax, "no scale source and no ground truth: monocular scale is arbitrary")
-    ax.set_ylabel("scale")
-    return _finish(fig, [ax], "scale over time")
+        for j, w in enumerate(windows):
+            sw = float(w.scale) if w.scale is not None else math.nan
+            ax.plot([w.t_start_s - t0, w.t_end_s - t0], [sw, sw], "-", color="tab:red",
+                    lw=2, label="Sim3 scale to ground truth, per window" if j == 0 else None)
+        ax.axhline(1.0, color="k", lw=0.8, ls="--")
+        ax.set_ylabel("true / estimated")
+    return _finish(fig, axes, "scale over time")
 
 
 def render_plots(data: ReportInput) -> dict[str, str]:
