@@ -304,3 +304,24 @@ def test_demo_camera_height_and_table(run_dir: Path, tiny_sim: Path) -> None:
     assert rows["frames"].startswith(f"{summary['n_frames']} ({summary['n_in_trajectory']} with a pose")
     assert rows["ATE, Sim3 aligned"].startswith(f"{ev['ate_sim3_m']:.3f} m")
     assert rows["wall time"] == f"simulate 10 s, run 20 s ({summary['n_frames'] / 20:.1f} frames/s)"
+
+
+@pytest.mark.parametrize("case", ["unknown key", "wrong type", "missing calibration"])
+def test_bad_config_and_missing_calibration_are_one_line(case: str, tmp_path: Path) -> None:
+    from tests.fuzz.helpers import make_folder
+
+    seq = make_folder(tmp_path / "seq")
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text({"unknown key": "tracking:\n  klt:\n    max_feature: 5\n",
+                    "wrong type": "seed: [1, 2]\n",
+                    "missing calibration": "seed: 1\n"}[case], encoding="utf-8")
+    if case == "missing calibration":
+        (seq / "camera.txt").unlink()
+    out = tmp_path / "out"
+    r = _amrvio("run", seq, "--out", out, "--config", cfg)
+    assert r.returncode == 1 and r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr.startswith("amrvio run: error: ")
+    expect = {"unknown key": "tracking.klt.max_feature", "wrong type": "seed",
+              "missing calibration": "calib"}[case]
+    assert expect in r.stderr, r.stderr
+    assert not (out / "summary.json").exists() and not (out / "report.html").exists()

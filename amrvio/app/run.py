@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from amrvio.config import PipelineConfig, config_from_dict, dump_config, load_config
-from amrvio.errors import ConfigError
+from amrvio.errors import ConfigError, DatasetFormatError
 from amrvio.io.base import Dataset, SkippedFrame
 from amrvio.pipeline.events import run_events
 from amrvio.pipeline.pipeline import PipelineOutput
@@ -148,6 +148,10 @@ def run(dataset: str | Path | Dataset, config: ConfigLike = None, *, out: str | 
         str(dataset), Path(calib) if calib is not None else None)
     if gt_traj is not None:
         ds = dataclasses.replace(ds, groundtruth=gt_traj, groundtruth_frame=gt_frame)
+    if ds.camera is None:
+        raise DatasetFormatError(ds.root, "the dataset has no camera calibration; pass one "
+                                          "with --calib FILE (Kalibr, EuRoC sensor.yaml, "
+                                          "ORB-SLAM3, KITTI calib.txt or DSO camera.txt)")
     setup = setup_diagnostics(ds, cfg.diagnostics) if cfg.diagnose else None
     notes = setup.notes if setup is not None else ()
     n_planned = min(len(ds.frames), max_frames or len(ds.frames))
