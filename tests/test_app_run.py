@@ -325,3 +325,18 @@ def test_bad_config_and_missing_calibration_are_one_line(case: str, tmp_path: Pa
               "missing calibration": "calib"}[case]
     assert expect in r.stderr, r.stderr
     assert not (out / "summary.json").exists() and not (out / "report.html").exists()
+
+
+def test_health_csv_has_one_row_per_frame_and_no_repeated_column(run_dir: Path) -> None:
+    with (run_dir / "health.csv").open(newline="") as fh:
+        header = next(csv.reader(fh))
+    assert len(header) == len(set(header)), sorted(h for h in header if header.count(h) > 1)
+    assert {"n_tracks", "vo_tracks", "status", "blur_flag", "exposure_ev", "parallax_px",
+            "accel_std_m_s2", "init_status", "events"} <= set(header)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    with (run_dir / "health.csv").open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == summary["n_frames"]
+    # the two track counts are different things: they differ somewhere
+    assert any(r["vo_tracks"] != r["n_tracks"] for r in rows)
+    assert all(int(r["vo_tracks"]) > 0 for r in rows if r["status"] == "tracked")

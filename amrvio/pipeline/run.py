@@ -150,9 +150,11 @@ def write_health(path: Path, records: Sequence[FrameRecord],
         w.writerows(rows)
 
 
-FRAME_COLUMNS = ["index", "t_s", "status", "segment", "is_keyframe", "n_tracks", "n_inliers",
+FRAME_COLUMNS = ["index", "t_s", "status", "segment", "is_keyframe", "vo_tracks", "n_inliers",
                  "tracking", "blur_score", "brightness_a", "brightness_b", "init_status", "scale",
                  "online_x", "online_y", "online_z", "events"]
+"""The tracking columns of health.csv; ``vo_tracks``: the tracker's live tracks (the
+diagnostics' own ``n_tracks`` counts the tracks since the parallax reference)."""
 
 
 def _num(v: float, fmt: str) -> str:
