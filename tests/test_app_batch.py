@@ -142,11 +142,13 @@ def test_a_rerun_skips_the_finished_recordings(local_batch: tuple[Path, str], fl
     assert "[1/1] room_broken: failed" in r.stdout  # a failed recording is tried again
     assert {n: (out / n / "summary.json").stat().st_mtime_ns for n in mtimes} == mtimes
     assert _csv(out / "batch.csv") == rows
-    # another configuration is another run: nothing is skipped
-    r = _amrvio("batch", fleet / "room_a", "--out", out, "--seed", "3", "--max-frames", "12")
+    # other options are another run: nothing is skipped
+    r = _amrvio("batch", fleet / "room_a", "--out", out, "--max-frames", "12")
     assert r.returncode == 0, r.stderr
     assert "skipped" not in r.stdout
     assert json.loads((out / "room_a" / "summary.json").read_text())["n_frames"] == 12
+    r = _amrvio("batch", fleet / "room_a", "--out", out, "--max-frames", "12")
+    assert "1 finished earlier" in r.stdout
 
 
 def test_ray_gives_the_table_of_the_local_pool(local_batch: tuple[Path, str], fleet: Path,

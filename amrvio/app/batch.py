@@ -139,15 +139,26 @@ def recordings(specs: Sequence[str]) -> list[Recording]:
 
 
 # ------------------------------------------------------------------------------------ one run
-def finished_here(folder: Path, config: dict[str, Any]) -> bool:
-    """``folder`` holds a run that finished with ``config`` (a re-run skips it)."""
+RUN_MARK = "batch_run.json"
+"""Written in a recording's folder after its run finished: the dataset spec and the options it
+ran with (a re-run skips the recording when they are the same)."""
+
+
+def _mark(rec: Recording, options: BatchOptions) -> dict[str, Any]:
+    # as read back from JSON (tuples become lists)
+    return json.loads(json.dumps({"dataset": rec.spec, "config": options.config,
+                                  "max_frames": options.max_frames, "report": options.report}))
+
+
+def finished_here(folder: Path, rec: Recording, options: BatchOptions) -> bool:
+    """``folder`` holds a finished run of ``rec`` with ``options`` (a re-run skips it)."""
     try:
         summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+        mark = json.loads((folder / RUN_MARK).read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return False
-    same = json.loads(json.dumps(config))  # as read back from JSON (tuples become lists)
     return (isinstance(summary, dict) and summary.get("state") == "finished"
-            and summary.get("config") == same)
+            and mark == _mark(rec, options))
 
 
 def run_recording(rec: Recording, out_root: str, options: BatchOptions) -> Row:
@@ -159,14 +170,18 @@ def run_recording(rec: Recording, out_root: str, options: BatchOptions) -> Row:
     from amrvio.pipeline.threads import limit_native_threads
 
     folder = Path(out_root) / rec.name
-    if finished_here(folder, options.config):
+    if finished_here(folder, rec, options):
         return table_row(rec, folder)
     limit_native_threads(1)
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        (folder / "error.txt").unlink(missing_ok=True)
-        run(rec.spec, config_from_dict(options.config), out=folder, force=True,
-            max_frames=options.max_frames, report=options.report)
+        for name in ("error.txt", RUN_MARK):
+            (folder / name).unlink(missing_ok=True)
+        res = run(rec.spec, config_from_dict(options.config), out=folder, force=True,
+                  max_frames=options.max_frames, report=options.report)
+        if not res.interrupted:
+            (folder / RUN_MARK).write_text(json.dumps(_mark(rec, options), indent=1) + "\n",
+                                           encoding="utf-8")
     except AmrvioError as err:
         return failed_row(rec, folder, " ".join(str(err).split()))
     except Exception as err:  # a bug must not stop the other recordings
@@ -350,6 +365,6 @@ td,th{{border:1px solid #ccc;padding:3px 6px}}th{{background:#f3f3f3}}.ok{{color
 """
 
 
-__all__ = ["COLUMNS", "LIST_SUFFIXES", "BatchOptions", "Recording", "expand_inputs", "failed_row",
+__all__ = ["COLUMNS", "LIST_SUFFIXES", "RUN_MARK", "BatchOptions", "Recording", "expand_inputs", "failed_row",
            "finished_here", "recordings", "run_local", "run_ray", "run_recording", "table_html",
            "table_row", "write_table"]

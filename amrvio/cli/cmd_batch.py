@@ -26,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, required=True,
                         help="output folder: one sub-folder per recording plus batch.csv and "
                              "batch.html; a re-run into it skips the recordings that finished "
-                             "with the same configuration")
+                             "with the same configuration and options")
     add_config_arguments(parser)
     parser.add_argument("--jobs", type=bounded(1, MAX_JOBS, integer=True), default=None,
                         metavar="N",
@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"[{done}/{total}] {row['recording']}: {what}", flush=True)
 
     done = {r.name: table_row(r, out / r.name) for r in recs
-            if finished_here(out / r.name, options.config)}
+            if finished_here(out / r.name, r, options)}
     todo = [r for r in recs if r.name not in done]
     print(f"amrvio batch: {len(recs)} recordings -> {out}"
           + (f" ({len(done)} finished earlier with the same configuration: skipped)"
