@@ -8,7 +8,7 @@ import pytest
 
 from tests.skip_policy import pytest_configure, skip_shared_missing
 
-__all__ = ["pytest_configure", "shared_data"]
+__all__ = ["make_tiny_sim", "pytest_configure", "shared_data", "tiny_sim"]
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 
@@ -19,3 +19,20 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         skip_shared_missing(f"{SHARED_DATA} (only developer machines and CI have it)")
     return SHARED_DATA
+
+
+def make_tiny_sim(root: Path, scene: str = "room", motion: str = "handheld", seed: int = 0,
+                  ev_steps: str = "1.5:+1") -> Path:
+    """A 3 s simulated recording (EuRoC layout, IMU, ground truth), 376x240 at 10 frames/s, no
+    blur, one exposure step: 30 frames that the VO tracks."""
+    from amrvio.sim.simulate import SimConfig, simulate
+
+    simulate(SimConfig(scene=scene, motion=motion, seconds=3.0, seed=seed, fps=10.0, width=376,
+                       height=240, blur=False, ev_steps=ev_steps), root)
+    return root
+
+
+@pytest.fixture(scope="session")
+def tiny_sim(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One :func:`make_tiny_sim` recording per test session (read only)."""
+    return make_tiny_sim(tmp_path_factory.mktemp("tiny_sim") / "room_handheld")

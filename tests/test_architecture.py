@@ -42,6 +42,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("pipeline", "config"),
     ("sim",),
     ("report",),
+    ("app",),
     ("cli", "demo"),
 )
 
@@ -466,7 +467,7 @@ def test_checker_flags_an_import_of_the_root_package_and_of_an_unlisted_part() -
                       "amrvio.newthing.__init__": "x = 1\n"})
     problems = layer_violations(mods)
     assert problems == [
-        "amrvio/cli/main.py:1: amrvio.cli.main (layer 13: cli, demo) imports amrvio (layer 14: the package root)",
+        "amrvio/cli/main.py:1: amrvio.cli.main (layer 14: cli, demo) imports amrvio (layer 15: the package root)",
         "amrvio/io/kitti.py:1: amrvio.io.kitti (layer 2: io) imports amrvio.newthing (a part in no layer)"]
     assert unplaced_parts(mods) == ["amrvio.newthing is in no layer: place it in LAYERS in tests/test_architecture.py"]
 

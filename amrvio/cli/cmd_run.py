@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from amrvio.cli.args import MAX_FRAMES, SEED_RANGE, bounded, interval, max_frames_int, seed_int
 
@@ -11,7 +12,8 @@ CAMERA_HEIGHT_M = (0.01, 100.0)
 """--camera-height range (m)."""
 
 NAME = "run"
-HELP = "run monocular visual odometry on a dataset and write trajectory, keyframes, map, status"
+HELP = ("diagnostics, tracking, evaluation and report in one pass: trajectory, health record, "
+        "events, advice, eval.json (with ground truth) and report.html")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -23,6 +25,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="write into a non-empty --out (the files of an earlier run are "
                              "removed first; other files are left alone)")
     parser.add_argument("--calib", type=Path, default=None, help="override the calibration file")
+    parser.add_argument("--gt", type=Path, default=None, metavar="FILE",
+                        help="ground truth for eval.json (TUM, EuRoC CSV or KITTI poses), "
+                             "replacing the dataset's own")
+    parser.add_argument("--gt-frame", choices=("cam", "body"), default="cam",
+                        help="--gt holds camera poses (default) or body poses (then times the "
+                             "dataset's camera-body transform)")
+    add_config_arguments(parser)
+    parser.add_argument("--progress", action="store_true",
+                        help="show the progress bar and the live health line on stderr even when "
+                             "it is not a terminal (default: only on a terminal)")
+    parser.add_argument("--no-report", action="store_true", help="do not write report.html")
+    parser.add_argument("--bag-out", type=Path, default=None, metavar="FOLDER",
+                        help="also write the trajectory as a ROS 2 bag (nav_msgs/Odometry on "
+                             "/amrvio/odometry, rosbag2 format 8), a new folder")
+
+
+def add_config_arguments(parser: argparse.ArgumentParser) -> None:
+    """--config and the options that override it, and --max-frames (``run`` and ``batch``)."""
     parser.add_argument("--config", type=Path, default=None, metavar="FILE.yaml",
                         help="pipeline configuration (keys = field names; `amrvio config --dump` "
                              "prints the defaults); the options below override it")
@@ -69,44 +89,59 @@ def build_config(args: argparse.Namespace) -> object:
     return cfg
 
 
+def show_progress(args: argparse.Namespace) -> bool:
+    """The progress bar: with --progress, or when stderr is a terminal."""
+    import sys
+
+    return bool(args.progress) or sys.stderr.isatty()
+
+
 def run(args: argparse.Namespace) -> int:
     import sys
 
+    from amrvio.app.run import run as run_recording
     from amrvio.cli.interrupt import StopRequest
     from amrvio.config import PipelineConfig
-    from amrvio.io.dataset import open_dataset
-    from amrvio.io.outdir import prepare_output_dir
-    from amrvio.pipeline.diagnose import setup_diagnostics
-    from amrvio.pipeline.run import run_pipeline
-    from amrvio.pipeline.run_output import RUN_OUTPUTS, RunWriter
     from amrvio.pipeline.threads import limit_native_threads
 
     cfg = build_config(args)
     if not isinstance(cfg, PipelineConfig):
         raise TypeError("build_config returned no PipelineConfig")
-    prepare_output_dir(args.out, args.force, RUN_OUTPUTS)
     # one thread for OpenCV and OpenBLAS: measured faster for the VO's small solves
     limit_native_threads(1)
-    ds = open_dataset(args.dataset, args.calib)
-    setup = setup_diagnostics(ds, cfg.diagnostics) if cfg.diagnose else None
-    n_planned = min(len(ds.frames), args.max_frames or len(ds.frames))
-    writer = RunWriter(args.out, cfg, setup.notes if setup is not None else (), n_planned)
-    writer.begin()
-    try:
-        with StopRequest() as stop:
-            out = run_pipeline(ds, cfg, max_frames=args.max_frames, progress=True,
-                               diagnostics=setup, sink=writer, stop=stop)
-            summary = writer.finish(out, interrupted=stop.requested)
-    except KeyboardInterrupt:  # a second Ctrl-C: keep the partial files as they are
-        writer.abandon()
-        raise
-    if stop.requested:
-        print(f"amrvio run: interrupted after {summary['n_frames']} of {n_planned} frames; "
-              f"partial outputs in {args.out} (summary.json: \"interrupted\": true)",
-              file=sys.stderr)
+    with StopRequest() as stop:
+        res = run_recording(args.dataset, cfg, out=args.out, calib=args.calib,
+                            max_frames=args.max_frames, force=args.force,
+                            progress=show_progress(args), report=not args.no_report,
+                            bag_out=args.bag_out, gt=args.gt, gt_frame=args.gt_frame,
+                            stop=stop)
+    summary = res.summary
+    if res.interrupted:
+        print(f"amrvio run: interrupted after {summary['n_frames']} frames; partial outputs in "
+              f"{args.out} (summary.json: \"interrupted\": true)", file=sys.stderr)
         return 130
-    counts = summary["status_counts"]
-    skipped = f", {summary['n_skipped']} skipped (see summary.json)" if summary["n_skipped"] else ""
-    print(f"{summary['n_frames']} frames {counts}{skipped}, {summary['n_keyframes']} keyframes, "
-          f"{summary['n_map_points']} map points -> {args.out}")
+    print(format_summary(summary, res.eval_summary, args.out))
     return 0
+
+
+def format_summary(summary: dict[str, Any], ev: dict[str, Any] | None, out: Path) -> str:
+    """The lines ``amrvio run`` prints at the end."""
+    counts = summary["status_counts"]
+    n_skipped = summary["n_skipped"]
+    skipped = f", {n_skipped} skipped (see summary.json)" if n_skipped else ""
+    lines = [f"{summary['n_frames']} frames {counts}{skipped}, {summary['n_keyframes']} keyframes, "
+             f"{summary['n_map_points']} map points -> {out}"]
+    if ev is not None:
+        if ev.get("error"):
+            lines.append(f"evaluation: not possible: {ev['error']}")
+        else:
+            text = (f"evaluation: ATE {ev['ate_sim3_m']:.3f} m Sim3 = "
+                    f"{ev['ate_sim3_pct_of_path']:.2f} % of {ev['path_length_m']:.1f} m")
+            if ev.get("ate_metric_m") is not None:
+                text += (f"; metric ATE {ev['ate_metric_m']:.3f} m, scale error "
+                         f"{ev['scale_error_pct']:.2f} %")
+            lines.append(text)
+    report = out / "report.html"
+    if report.is_file():
+        lines.append(f"report: {report}")
+    return "\n".join(lines)

@@ -28,6 +28,7 @@ from amrvio.errors import DatasetFormatError
 from amrvio.imu.window import frame_imu_window
 from amrvio.io.base import Dataset, SkippedFrame, load_checked
 from amrvio.pipeline.diagnose import DiagnosticsSetup, setup_diagnostics
+from amrvio.pipeline.events import flagged_ranges
 from amrvio.pipeline.pipeline import Pipeline, PipelineOutput
 from amrvio.pipeline.records import FrameRecord, PoseStatus
 from amrvio.types.sensors import Frame
@@ -149,9 +150,11 @@ def write_health(path: Path, records: Sequence[FrameRecord],
         w.writerows(rows)
 
 
-FRAME_COLUMNS = ["index", "t_s", "status", "segment", "is_keyframe", "n_tracks", "n_inliers",
+FRAME_COLUMNS = ["index", "t_s", "status", "segment", "is_keyframe", "vo_tracks", "n_inliers",
                  "tracking", "blur_score", "brightness_a", "brightness_b", "init_status", "scale",
                  "online_x", "online_y", "online_z", "events"]
+"""The tracking columns of health.csv; ``vo_tracks``: the tracker's live tracks (the
+diagnostics' own ``n_tracks`` counts the tracks since the parallax reference)."""
 
 
 def _num(v: float, fmt: str) -> str:
@@ -301,8 +304,9 @@ def write_advice(path: Path, records: Sequence[FrameRecord], config: PipelineCon
 def summarise(out: PipelineOutput, config: PipelineConfig | None, *,
               skipped: Sequence[SkippedFrame] = (), interrupted: bool = False,
               n_in_trajectory: int | None = None) -> dict[str, Any]:
-    """The run summary from the records: frames, status counts, keyframes, events, skipped
-    frames, the configuration; whether the run was interrupted (Ctrl-C: the figures cover the
+    """The run summary from the records: frames, status counts, keyframes, events, the flagged
+    frame ranges by cause (:func:`amrvio.pipeline.events.flagged_ranges`, as frame indices),
+    skipped frames, the configuration; whether the run was interrupted (Ctrl-C: the figures cover the
     frames done). No wall-clock figure: the same input gives the same summary (timings are in
     timings.json)."""
     counts = {s.value: sum(r.status is s for r in out.records) for s in PoseStatus}
@@ -318,6 +322,8 @@ def summarise(out: PipelineOutput, config: PipelineConfig | None, *,
         "n_keyframes": len(out.keyframe_indices),
         "n_map_points": len(out.map_points),
         "events": [[r.index, e] for r in out.records for e in r.events],
+        "flagged_ranges": {c: [[out.records[a].index, out.records[b].index] for a, b in rr]
+                           for c, rr in flagged_ranges(out.records).items()},
         "skipped_frames": [{"index": s.index, "t_ns": s.t_ns, "file": s.file, "problem": s.problem}
                            for s in skipped],
         "config": config_to_dict(config or PipelineConfig()),

@@ -2,7 +2,8 @@
 
 :class:`RunWriter` is the :class:`~amrvio.pipeline.run.FrameSink` of a command-line run. While the
 frames go by it appends to ``health.csv`` (each frame's row as processed) and to
-``trajectory_online.tum`` (the causal pose of each frame not LOST when processed), and keeps
+``trajectory_online.tum`` (the causal pose of each frame not LOST when processed) and to
+``events.jsonl`` (each frame's events, see :mod:`amrvio.pipeline.events`), and keeps
 ``summary.json`` saying ``"state": "running"`` with the frame count. At the end
 :meth:`RunWriter.finish` writes every output from the final records (refined poses, final
 statuses), each file moved into place whole. A run stopped by Ctrl-C ends between two frames and
@@ -20,20 +21,24 @@ from typing import IO, Any
 from amrvio.config import PipelineConfig, config_to_dict
 from amrvio.diagnostics.health import health_rows
 from amrvio.io.base import SkippedFrame
+from amrvio.pipeline.events import event_line, frame_events, run_events, skipped_event
 from amrvio.pipeline.pipeline import PipelineOutput
 from amrvio.pipeline.records import FrameRecord, PoseStatus
 from amrvio.pipeline.run import (
     FRAME_COLUMNS,
     TRAJECTORY_COMMENT,
     frame_row,
+    replacing,
     write_json,
     write_outputs,
 )
 
 RUN_OUTPUTS: tuple[str, ...] = (
     "trajectory.tum", "trajectory_online.tum", "keyframes.tum", "map.ply", "health.csv",
-    "advice.txt", "scale_drift.csv", "summary.json", "timings.json")
-"""The files ``amrvio run`` writes (``--force`` removes these from an earlier run)."""
+    "events.jsonl", "advice.txt", "scale_drift.csv", "summary.json", "timings.json", "eval.json",
+    "report.html")
+"""The files ``amrvio run`` writes (``--force`` removes these from an earlier run; eval.json and
+report.html are written by the caller, see :mod:`amrvio.app.run`)."""
 
 SUMMARY_EVERY = 20
 """The running summary.json is rewritten every this many frames."""
@@ -54,6 +59,7 @@ class RunWriter:
         self._health: IO[str] | None = None
         self._health_csv: csv.DictWriter[str] | None = None
         self._online: IO[str] | None = None
+        self._events: IO[str] | None = None
 
     # ----------------------------------------------------------------- as the run goes
     def begin(self) -> None:
@@ -62,6 +68,7 @@ class RunWriter:
         self._online.write(TRAJECTORY_COMMENT.format(name="trajectory_online.tum").replace(
             "LOST frames", "frames LOST when processed") + "\n# timestamp_s tx ty tz qx qy qz qw\n")
         self._online.flush()
+        self._events = (self.out_dir / "events.jsonl").open("w", encoding="utf-8")
         self._write_running()
 
     def record(self, rec: FrameRecord) -> None:
@@ -75,11 +82,19 @@ class RunWriter:
             if line is not None:
                 self._online.write(line + "\n")
                 self._online.flush()
+        if self._events is not None:
+            lines = frame_events(rec)
+            if lines:
+                self._events.write("".join(event_line(e) + "\n" for e in lines))
+                self._events.flush()
         if len(self.online_status) % SUMMARY_EVERY == 0:
             self._write_running()
 
     def skip(self, skipped: SkippedFrame) -> None:
         self.skipped.append(skipped)
+        if self._events is not None:
+            self._events.write(event_line(skipped_event(skipped)) + "\n")
+            self._events.flush()
 
     def _health_row(self, rec: FrameRecord) -> None:
         row = dict(zip(FRAME_COLUMNS, frame_row(rec), strict=True))
@@ -112,10 +127,10 @@ class RunWriter:
         })
 
     def _close(self) -> None:
-        for fh in (self._health, self._online):
+        for fh in (self._health, self._online, self._events):
             if fh is not None:
                 fh.close()
-        self._health = self._online = None
+        self._health = self._online = self._events = None
 
     # ----------------------------------------------------------------- the end
     def finish(self, out: PipelineOutput, interrupted: bool) -> dict[str, Any]:
@@ -123,6 +138,10 @@ class RunWriter:
         self._close()
         summary = write_outputs(out, self.out_dir, self.config, self.notes, skipped=self.skipped,
                                 interrupted=interrupted, online_status=self.online_status)
+        with replacing(self.out_dir / "events.jsonl") as tmp:
+            tmp.write_text("".join(event_line(e) + "\n" for e in run_events(out.records,
+                                                                            self.skipped)),
+                           encoding="utf-8")
         return summary
 
     def abandon(self) -> None:
