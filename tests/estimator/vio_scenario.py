@@ -1,0 +1,98 @@
+"""Synthetic VIO scenarios for the back-end tests: a simulator motion (exact kinematics), its IMU
+(amrvio.sim.imu_synth, optionally noisy with bias random walks), and landmark observations made
+by projecting random 3-D points on the walls, floor and ceiling of a box around the path with the
+ground-truth camera poses, plus pixel noise."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amrvio.estimator.vio_types import VioInitialState, VisualObservations
+from amrvio.imu.preintegration import ImuBias, InertialState
+from amrvio.sim.imu_synth import SyntheticImu, synthesize_imu
+from amrvio.sim.kinematics import Motion
+from amrvio.sim.motion import default_T_body_cam, make_motion
+from amrvio.types.lie import SE3, SO3
+from amrvio.types.sensors import ImuData, ImuNoise
+
+F64 = NDArray[np.float64]
+
+START_NS = 1_000_000_000_000  # a recording does not start at t = 0
+K_EUROC = np.array([[458.654, 0.0, 367.215], [0.0, 457.296, 248.375], [0.0, 0.0, 1.0]])
+SIZE_WH = (752, 480)
+
+
+def box_points(lo: F64, hi: F64, n: int, rng: np.random.Generator) -> F64:
+    """``n`` points uniformly on the six faces of the box [lo, hi] (area-weighted)."""
+    ext = hi - lo
+    areas = np.array([ext[1] * ext[2], ext[1] * ext[2], ext[0] * ext[2], ext[0] * ext[2],
+                      ext[0] * ext[1], ext[0] * ext[1]])
+    face = rng.choice(6, size=n, p=areas / areas.sum())
+    P = lo + rng.uniform(size=(n, 3)) * ext
+    axis = face // 2
+    P[np.arange(n), axis] = np.where(face % 2 == 0, lo[axis], hi[axis])
+    return P
+
+
+@dataclass
+class Scenario:
+    motion: Motion
+    syn: SyntheticImu
+    points: F64
+    T_body_cam: SE3
+    rng: np.random.Generator
+    pixel_sigma: float
+    max_obs: int = 150
+
+    def t_ns(self, t_s: float) -> int:
+        return START_NS + int(round(t_s * 1e9))
+
+    def true_state(self, t_s: float) -> InertialState:
+        st = self.motion.states(np.array([t_s]))
+        i = int(np.argmin(np.abs(self.syn.t_s - t_s)))
+        bias = ImuBias(self.syn.gyro_bias[i], self.syn.accel_bias[i])
+        return InertialState(self.t_ns(t_s), SE3(SO3.from_matrix(st.R_world_body[0]), st.p_world[0]),
+                             st.v_world[0], bias)
+
+    def imu_between(self, t0_s: float, t1_s: float, margin_s: float = 0.01) -> ImuData:
+        return self.syn.imu.window(self.t_ns(t0_s - margin_s), self.t_ns(t1_s + margin_s))
+
+    def observe(self, t_s: float, points: F64 | None = None, id_offset: int = 0) -> VisualObservations:
+        """Noisy pixels of the points the camera sees at ``t_s`` (the ``max_obs`` lowest ids)."""
+        P = self.points if points is None else points
+        T_wc = self.true_state(t_s).T_world_body @ self.T_body_cam
+        pc = (P - T_wc.t) @ T_wc.R
+        z = pc[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = K_EUROC[0, 0] * pc[:, 0] / z + K_EUROC[0, 2]
+            v = K_EUROC[1, 1] * pc[:, 1] / z + K_EUROC[1, 2]
+        vis = (z > 0.3) & (z < 30.0) & (u > 5) & (u < SIZE_WH[0] - 5) & (v > 5) & (v < SIZE_WH[1] - 5)
+        ids = np.flatnonzero(vis)[: self.max_obs]
+        uv = np.stack([u[ids], v[ids]], axis=1) + self.rng.normal(0.0, self.pixel_sigma, (ids.size, 2))
+        return VisualObservations(ids + id_offset, uv)
+
+    def initial(self, t_s: float = 0.0, seed_sigma_m: float | None = None) -> VioInitialState:
+        """The true state at ``t_s``; with ``seed_sigma_m``, also the points seen at ``t_s`` with
+        that much noise per coordinate (what a VI initialiser hands over with its map)."""
+        if seed_sigma_m is None:
+            return VioInitialState(self.true_state(t_s))
+        ids = self.observe(t_s).ids
+        noisy = self.points[ids] + self.rng.normal(0.0, seed_sigma_m, (ids.size, 3))
+        return VioInitialState(self.true_state(t_s), landmark_ids=ids, landmarks_world=noisy)
+
+
+def make_scenario(kind: str, duration_s: float, seed: int = 0, noise: ImuNoise | None = None,
+                  pixel_sigma: float = 0.5, n_points: int = 3000,
+                  gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                  accel_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Scenario:
+    rng = np.random.default_rng(seed)
+    motion = make_motion(kind, duration_s, seed=seed)
+    syn = synthesize_imu(motion, 200.0, noise, rng if noise is not None else None, START_NS,
+                         gyro_bias, accel_bias)
+    p = motion.states(np.linspace(0.0, duration_s, 200)).p_world
+    lo = np.array([p[:, 0].min() - 4.0, p[:, 1].min() - 4.0, 0.0])
+    hi = np.array([p[:, 0].max() + 4.0, p[:, 1].max() + 4.0, 3.0])
+    return Scenario(motion, syn, box_points(lo, hi, n_points, rng), default_T_body_cam(), rng, pixel_sigma)
