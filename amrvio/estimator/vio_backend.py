@@ -89,7 +89,7 @@ class VioBackend:
         self.cfg = config
         self._cam = make_camera(K, T_body_cam, config.visual)
         self._buffer = ImuBuffer(config.max_imu_gap_s)
-        self._pre = Preintegrator(preintegration_params(config.imu, config.gravity_m_s2), self._buffer)
+        self._pre = Preintegrator(preintegration_params(config.imu_model(), config.gravity_m_s2), self._buffer)
         self._smoother: gtsam.IncrementalFixedLagSmoother | None = None
         self._values: gtsam.Values | None = None
         self._tracks = LandmarkTracks()
@@ -167,6 +167,10 @@ class VioBackend:
             self._drop_state()
             return FrameResult(est, False, None, VisualStats(nobs), None, time.perf_counter() - t0)
         predicted, pred_cov = self._pre.predict(last, last_cov)
+        disp_cov = last_cov.copy()
+        disp_cov[3:6, :] = disp_cov[:, 3:6] = 0.0  # the previous position is not part of a displacement
+        disp_p_sig, _ = world_position_velocity_sigma(predicted, self._pre.predict(last, disp_cov)[1])
+        disp_sig = float(np.linalg.norm(disp_p_sig))
         prev = self._window[-1]
         last_kf = next(f for f in reversed(self._window) if f.keyframe)
         k, ordinal = prev.index + 1, last_kf.ordinal + 1
@@ -230,10 +234,11 @@ class VioBackend:
         rms = self._rms_px(state, used)
         pp_sig, pv_sig = world_position_velocity_sigma(predicted, pred_cov)
         bias_sig = np.sqrt(np.maximum(np.diag(cov)[9:], 0.0))
-        self._history.append(KeyframeCheckInput(predicted, pp_sig, pv_sig, state, bias_sig[3:], bias_sig[:3], rms))
+        self._history.append(KeyframeCheckInput(predicted, pp_sig, pv_sig, disp_sig, state, bias_sig[3:], bias_sig[:3],
+                                                rms))
         while (t_ns - self._history[0].optimised.t_ns) * 1e-9 > self.cfg.checks.window_s + 1.0:
             self._history.popleft()
-        report = check_keyframe(self._history, self.cfg.imu, self.cfg.checks)
+        report = check_keyframe(self._history, self.cfg.imu_model(), self.cfg.checks)
         p_sig, v_sig = world_position_velocity_sigma(state, cov)
         est = VioEstimate(t_ns, EstimateKind.SMOOTHED, VioStatus.OK, state, p_sig, v_sig)
         stats = VisualStats(nobs, len(used), n_gated, n_new, len(self._tracks.active), rms)

@@ -7,10 +7,11 @@ Each check compares the keyframe's optimised state with something it cannot fake
   state away from what the IMU says is a wrong map, a wrong association or a broken IMU.
 - SCALE: over the recent frames, the optimised displacements against the IMU-predicted ones
   (least-squares ratio ``s = sum(d_opt . d_imu) / sum(|d_imu|^2)``); the visual scale drifting or
-  jumping shows as ``s != 1``. It fails when both ``|s - 1|`` and the along-track correction it
-  amounts to (metres) are too large: a slow vehicle whose drift vision corrects by a centimetre
-  has a large ``|s - 1|`` on a short path, but no scale problem. Judged only when the predicted
-  path is long enough.
+  jumping shows as ``s != 1``. It fails when ``|s - 1|`` is too large and the along-track
+  correction it amounts to (metres) is significant against the uncertainty of the predicted
+  displacements (their sum: the errors of consecutive predictions are correlated through the
+  velocity): a vehicle whose drift vision corrects by a centimetre on a short path has a large
+  ``|s - 1|``, but no scale problem. Judged only when the predicted path is long enough.
 - BIAS_MAGNITUDE: each bias axis against the bound the IMU's specification allows (set it from
   the datasheet's turn-on bias, 3 sigma; the defaults are loose bounds for MEMS IMUs).
 - BIAS_DRIFT: the change of the bias estimate over the recent frames against what the bias
@@ -44,9 +45,9 @@ class CheckConfig:
 
     jump_sigma: allowed difference optimised - predicted, in predicted standard deviations;
     jump_floor_m / jump_floor_m_s: the smallest allowed position / velocity difference.
-    window_s: how far back the scale and bias-drift checks look; max_scale_error: allowed |s - 1|
-    (and the along-track correction may not exceed jump_floor_m); min_scale_path_m: predicted
-    path the window needs for the scale check.
+    window_s: how far back the scale and bias-drift checks look; max_scale_error: allowed |s - 1|;
+    scale_sigma: allowed along-track correction, in sums of displacement sigmas (and at least
+    1 cm); min_scale_path_m: predicted path the window needs for the scale check.
     gyro_bias_max_rad_s / accel_bias_max_m_s2: the specification's bound on each bias axis.
     bias_drift_sigma: allowed bias change in standard deviations of the random walk (plus the
     first estimate's uncertainty). max_reprojection_rms_px: allowed RMS reprojection error.
@@ -56,7 +57,8 @@ class CheckConfig:
     jump_floor_m: float = 0.05
     jump_floor_m_s: float = 0.1
     window_s: float = 1.0
-    max_scale_error: float = 0.1
+    max_scale_error: float = 0.05
+    scale_sigma: float = 3.0
     min_scale_path_m: float = 0.15
     gyro_bias_max_rad_s: float = 0.15
     accel_bias_max_m_s2: float = 0.6
@@ -64,7 +66,8 @@ class CheckConfig:
     max_reprojection_rms_px: float = 3.0
 
     def __post_init__(self) -> None:
-        for name in ("jump_sigma", "jump_floor_m", "jump_floor_m_s", "window_s", "max_scale_error", "min_scale_path_m",
+        for name in ("jump_sigma", "jump_floor_m", "jump_floor_m_s", "window_s", "max_scale_error", "scale_sigma",
+                     "min_scale_path_m",
                      "gyro_bias_max_rad_s", "accel_bias_max_m_s2", "bias_drift_sigma",
                      "max_reprojection_rms_px"):
             v = float(getattr(self, name))
@@ -133,14 +136,16 @@ class ConsistencyReport:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class KeyframeCheckInput:
-    """What the checks read of one keyframe: the IMU prediction and its per-axis world-frame
-    sigmas (position m, velocity m/s), the optimised state, the per-axis sigma of the optimised
-    gyro and accel biases (None when unknown) and the RMS reprojection error (None: no
-    observation)."""
+    """What the checks read of one frame: the IMU prediction and its per-axis world-frame sigmas
+    (position m, velocity m/s), the standard deviation of the predicted displacement from the
+    previous frame (m; the position sigma without the previous position's own uncertainty), the
+    optimised state, the per-axis sigma of the optimised gyro and accel biases (None when
+    unknown) and the RMS reprojection error (None: no observation)."""
 
     predicted: InertialState
     predicted_position_sigma_m: F64
     predicted_velocity_sigma_m_s: F64
+    displacement_sigma_m: float
     optimised: InertialState
     gyro_bias_sigma_rad_s: F64 | None
     accel_bias_sigma_m_s2: F64 | None
@@ -179,19 +184,21 @@ def recent(history: Sequence[KeyframeCheckInput], window_s: float) -> list[Keyfr
 
 @dataclass(frozen=True, slots=True)
 class ScaleRatio:
-    """``s`` (NaN without a path), the along-track correction sum((d_opt - d_imu) . u_imu) (m)
-    and the predicted path sum |d_imu| (m)."""
+    """``s`` (NaN without a path), the along-track correction sum((d_opt - d_imu) . u_imu) (m),
+    the predicted path sum |d_imu| (m) and the sum of the displacement sigmas (m)."""
 
     s: float
     along_m: float
     path_m: float
+    sigma_m: float
 
 
 def scale_ratio(history: Sequence[KeyframeCheckInput]) -> ScaleRatio:
     """Over consecutive entries: d_opt = p_opt[k] - p_opt[k-1] and d_imu = p_pred[k] - p_opt[k-1];
     s = sum(d_opt . d_imu) / sum(|d_imu|^2)."""
-    num = den = path = along = 0.0
+    num = den = path = along = sigma = 0.0
     for prev, cur in zip(history[:-1], history[1:], strict=True):
+        sigma += cur.displacement_sigma_m
         p0 = prev.optimised.T_world_body.t
         d_opt = cur.optimised.T_world_body.t - p0
         d_imu = cur.predicted.T_world_body.t - p0
@@ -201,22 +208,24 @@ def scale_ratio(history: Sequence[KeyframeCheckInput]) -> ScaleRatio:
         path += n
         if n > 0:
             along += float((d_opt - d_imu) @ d_imu) / n
-    return ScaleRatio(num / den if den > 0 else float("nan"), along, path)
+    return ScaleRatio(num / den if den > 0 else float("nan"), along, path, sigma)
 
 
 def check_scale(history: Sequence[KeyframeCheckInput], cfg: CheckConfig) -> CheckResult:
-    """Fails when |s - 1| > max_scale_error and |along-track correction| > jump_floor_m over the
-    last ``window_s`` (see :func:`scale_ratio`); the value is the smaller of the two ratios."""
+    """Fails when |s - 1| > max_scale_error and |along-track correction| > max(1 cm,
+    scale_sigma * sum of displacement sigmas) over the last ``window_s`` (see
+    :func:`scale_ratio`); the value is the smaller of the two ratios."""
     window = recent(history, cfg.window_s)
     if len(window) < 2:
         return _skip(CheckName.SCALE, "fewer than 2 frames")
     r = scale_ratio(window)
     if not r.path_m >= cfg.min_scale_path_m:
         return _skip(CheckName.SCALE, f"predicted path {r.path_m:.3f} m < {cfg.min_scale_path_m} m")
-    value = min(abs(r.s - 1.0) / cfg.max_scale_error, abs(r.along_m) / cfg.jump_floor_m)
+    allowed_m = max(0.01, cfg.scale_sigma * r.sigma_m)
+    value = min(abs(r.s - 1.0) / cfg.max_scale_error, abs(r.along_m) / allowed_m)
     return _verdict(CheckName.SCALE, value, 1.0,
                     f"optimised / IMU-predicted displacement {r.s:.3f} over {len(window)} frames, "
-                    f"{r.path_m:.2f} m path, along-track correction {r.along_m:+.3f} m")
+                    f"{r.path_m:.2f} m path, along-track correction {r.along_m:+.3f} m (allowed {allowed_m:.3f})")
 
 
 def check_bias_magnitude(state: InertialState, cfg: CheckConfig) -> CheckResult:

@@ -5,12 +5,15 @@ ground-truth camera poses, plus pixel noise."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from amrvio.estimator.vio_types import VioInitialState, VisualObservations
+from amrvio.estimator.vio_backend import VioBackend
+from amrvio.estimator.vio_types import FrameResult, VioConfig, VioInitialState, VisualObservations
+from amrvio.geometry.align import umeyama
 from amrvio.imu.preintegration import ImuBias, InertialState
 from amrvio.sim.imu_synth import SyntheticImu, synthesize_imu
 from amrvio.sim.kinematics import Motion
@@ -96,3 +99,61 @@ def make_scenario(kind: str, duration_s: float, seed: int = 0, noise: ImuNoise |
     lo = np.array([p[:, 0].min() - 4.0, p[:, 1].min() - 4.0, 0.0])
     hi = np.array([p[:, 0].max() + 4.0, p[:, 1].max() + 4.0, 3.0])
     return Scenario(motion, syn, box_points(lo, hi, n_points, rng), default_T_body_cam(), rng, pixel_sigma)
+
+
+@dataclass
+class RunLog:
+    """What a run gave: per frame the time, the result and the ground truth."""
+
+    t_s: list[float]
+    results: list[FrameResult]
+    truth: list[InertialState]
+
+    @property
+    def states(self) -> list[InertialState]:
+        out = []
+        for r in self.results:
+            if r.estimate.state is None:
+                raise AssertionError(f"frame without a state: {r.estimate.status}")
+            out.append(r.estimate.state)
+        return out
+
+    def position_errors_m(self) -> F64:
+        return np.array([np.linalg.norm(e.T_world_body.t - g.T_world_body.t)
+                         for e, g in zip(self.states, self.truth, strict=True)])
+
+    def se3_ate_m(self) -> float:
+        """RMS position error after the best rigid alignment (Umeyama, no scale)."""
+        est = np.array([s.T_world_body.t for s in self.states])
+        gt = np.array([s.T_world_body.t for s in self.truth])
+        S = umeyama(est, gt, with_scale=False)
+        return float(np.sqrt(np.mean(np.sum((S.act(est) - gt) ** 2, axis=1))))
+
+    def failed_checks(self) -> list[tuple[float, str]]:
+        return [(t, r.checks.summary()) for t, r in zip(self.t_s, self.results, strict=True)
+                if r.checks is not None and not r.checks.ok]
+
+
+def run_frames(sc: Scenario, backend: VioBackend, t0_s: float, t1_s: float, dt_s: float = 0.1,
+               observe: Callable[[float], VisualObservations] | None = None) -> RunLog:
+    """``add_frame`` every ``dt_s`` in (t0, t1], with the IMU since the previous frame (10 ms
+    margins, as amrvio.imu.window gives it)."""
+    log = RunLog([], [], [])
+    see = sc.observe if observe is None else observe
+    n = int(round((t1_s - t0_s) / dt_s))
+    for i in range(1, n + 1):
+        t = t0_s + i * dt_s
+        log.results.append(backend.add_frame(sc.t_ns(t), sc.imu_between(t - dt_s, t), see(t)))
+        log.t_s.append(t)
+        log.truth.append(sc.true_state(t))
+    return log
+
+
+def start(sc: Scenario, t0_s: float = 0.0, seed_sigma_m: float | None = 0.02, config: VioConfig | None = None,
+          init: VioInitialState | None = None) -> VioBackend:
+    backend = VioBackend(VioConfig() if config is None else config, K_EUROC, sc.T_body_cam)
+    est = backend.initialise(sc.initial(t0_s, seed_sigma_m) if init is None else init,
+                             sc.imu_between(t0_s, t0_s + 0.1), sc.observe(t0_s))
+    if not est.ok:
+        raise AssertionError(f"initialise failed: {est.status}")
+    return backend
