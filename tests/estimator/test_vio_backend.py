@@ -27,11 +27,12 @@ from amrvio.types.sensors import ImuData, ImuNoise
 from tests.estimator.vio_scenario import K_EUROC, RunLog, Scenario, make_scenario, run_frames, start
 
 NOISE = ImuNoise.euroc_adis16448()
-BIASES = {"gyro_bias": (0.01, -0.02, 0.015), "accel_bias": (0.05, -0.1, 0.08)}
+GYRO_BIAS = (0.01, -0.02, 0.015)
+ACCEL_BIAS = (0.05, -0.1, 0.08)
 
 
 def _scenario(kind: str, seconds: float, seed: int = 1) -> Scenario:
-    return make_scenario(kind, seconds, seed=seed, noise=NOISE, **BIASES)
+    return make_scenario(kind, seconds, seed=seed, noise=NOISE, gyro_bias=GYRO_BIAS, accel_bias=ACCEL_BIAS)
 
 
 @pytest.fixture(scope="module")
