@@ -82,7 +82,7 @@ class VioConfig:
     imu: ImuNoise = field(default_factory=ImuNoise.euroc_adis16448)
     imu_noise_scale: float = 1.0
     gravity_m_s2: float = 9.81
-    window_keyframes: int = 10
+    window_keyframes: int = 15
     max_imu_gap_s: float = 0.05
     iterations: int = 1
     visual: VisualConfig = field(default_factory=VisualConfig)

@@ -1,7 +1,9 @@
-"""Synthetic VIO scenarios for the back-end tests: a simulator motion (exact kinematics), its IMU
-(amrvio.sim.imu_synth, optionally noisy with bias random walks), and landmark observations made
-by projecting random 3-D points on the walls, floor and ceiling of a box around the path with the
-ground-truth camera poses, plus pixel noise."""
+"""Synthetic VIO scenarios for testing and timing the back-end without images: a simulator motion
+(exact kinematics), its IMU (amrvio.sim.imu_synth, optionally noisy with bias random walks), and
+landmark observations made by projecting random 3-D points on the walls, floor and ceiling of a
+box around the path with the ground-truth camera poses (EuRoC cam0 intrinsics, 752 x 480), plus
+pixel noise. ``run_frames`` feeds :class:`amrvio.estimator.vio_backend.VioBackend` and keeps the
+ground truth next to each result."""
 
 from __future__ import annotations
 
@@ -23,7 +25,9 @@ from amrvio.types.sensors import ImuData, ImuNoise
 
 F64 = NDArray[np.float64]
 
-START_NS = 1_000_000_000_000  # a recording does not start at t = 0
+#: the scenario's t = 0 (a recording does not start at 0 ns)
+START_NS = 1_000_000_000_000
+#: EuRoC cam0's pinhole intrinsics and image size
 K_EUROC = np.array([[458.654, 0.0, 367.215], [0.0, 457.296, 248.375], [0.0, 0.0, 1.0]])
 SIZE_WH = (752, 480)
 
@@ -40,8 +44,12 @@ def box_points(lo: F64, hi: F64, n: int, rng: np.random.Generator) -> F64:
     return P
 
 
-@dataclass
+@dataclass(frozen=True, slots=True, eq=False)
 class Scenario:
+    """A motion, its IMU (with the true biases), the landmarks (P, 3), the camera mount, the
+    random generator of the pixel noise (advanced by every ``observe``), the pixel noise sigma
+    and the most landmarks one frame observes."""
+
     motion: Motion
     syn: SyntheticImu
     points: F64
@@ -51,9 +59,11 @@ class Scenario:
     max_obs: int = 150
 
     def t_ns(self, t_s: float) -> int:
+        """The stamp of scenario time ``t_s``."""
         return START_NS + int(round(t_s * 1e9))
 
     def true_state(self, t_s: float) -> InertialState:
+        """Pose, velocity and the IMU's true biases (at the nearest IMU sample) at ``t_s``."""
         st = self.motion.states(np.array([t_s]))
         i = int(np.argmin(np.abs(self.syn.t_s - t_s)))
         bias = ImuBias(self.syn.gyro_bias[i], self.syn.accel_bias[i])
@@ -61,6 +71,7 @@ class Scenario:
                              st.v_world[0], bias)
 
     def imu_between(self, t0_s: float, t1_s: float, margin_s: float = 0.01) -> ImuData:
+        """The IMU samples in [t0 - margin, t1 + margin]."""
         return self.syn.imu.window(self.t_ns(t0_s - margin_s), self.t_ns(t1_s + margin_s))
 
     def observe(self, t_s: float, points: F64 | None = None, id_offset: int = 0) -> VisualObservations:
@@ -91,6 +102,10 @@ def make_scenario(kind: str, duration_s: float, seed: int = 0, noise: ImuNoise |
                   pixel_sigma: float = 0.5, n_points: int = 3000,
                   gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0),
                   accel_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Scenario:
+    """Motion ``kind`` (amrvio.sim.motion.make_motion) for ``duration_s``, a 200 Hz IMU (exact
+    when ``noise`` is None, else with its white noise and bias walks from the given initial
+    biases), ``n_points`` landmarks on a box 4 m wider than the path on each side, 0-3 m high,
+    and the default camera mount."""
     rng = np.random.default_rng(seed)
     motion = make_motion(kind, duration_s, seed=seed)
     syn = synthesize_imu(motion, 200.0, noise, rng if noise is not None else None, START_NS,
@@ -101,24 +116,26 @@ def make_scenario(kind: str, duration_s: float, seed: int = 0, noise: ImuNoise |
     return Scenario(motion, syn, box_points(lo, hi, n_points, rng), default_T_body_cam(), rng, pixel_sigma)
 
 
-@dataclass
+@dataclass(frozen=True, slots=True, eq=False)
 class RunLog:
-    """What a run gave: per frame the time, the result and the ground truth."""
+    """What a run gave: per frame the time (s), the result and the ground truth."""
 
-    t_s: list[float]
-    results: list[FrameResult]
-    truth: list[InertialState]
+    t_s: tuple[float, ...]
+    results: tuple[FrameResult, ...]
+    truth: tuple[InertialState, ...]
 
     @property
     def states(self) -> list[InertialState]:
+        """The estimated states; a frame without one (a failed update) is an error here."""
         out = []
-        for r in self.results:
+        for t, r in zip(self.t_s, self.results, strict=True):
             if r.estimate.state is None:
-                raise AssertionError(f"frame without a state: {r.estimate.status}")
+                raise RuntimeError(f"frame at {t:.2f} s has no state: {r.estimate.status.value}")
             out.append(r.estimate.state)
         return out
 
     def position_errors_m(self) -> F64:
+        """(N,) distance of each estimated position to the truth."""
         return np.array([np.linalg.norm(e.T_world_body.t - g.T_world_body.t)
                          for e, g in zip(self.states, self.truth, strict=True)])
 
@@ -130,6 +147,7 @@ class RunLog:
         return float(np.sqrt(np.mean(np.sum((S.act(est) - gt) ** 2, axis=1))))
 
     def failed_checks(self) -> list[tuple[float, str]]:
+        """(time, summary) of every frame whose consistency checks failed."""
         return [(t, r.checks.summary()) for t, r in zip(self.t_s, self.results, strict=True)
                 if r.checks is not None and not r.checks.ok]
 
@@ -138,22 +156,24 @@ def run_frames(sc: Scenario, backend: VioBackend, t0_s: float, t1_s: float, dt_s
                observe: Callable[[float], VisualObservations] | None = None) -> RunLog:
     """``add_frame`` every ``dt_s`` in (t0, t1], with the IMU since the previous frame (10 ms
     margins, as amrvio.imu.window gives it)."""
-    log = RunLog([], [], [])
     see = sc.observe if observe is None else observe
     n = int(round((t1_s - t0_s) / dt_s))
-    for i in range(1, n + 1):
-        t = t0_s + i * dt_s
-        log.results.append(backend.add_frame(sc.t_ns(t), sc.imu_between(t - dt_s, t), see(t)))
-        log.t_s.append(t)
-        log.truth.append(sc.true_state(t))
-    return log
+    times = [t0_s + i * dt_s for i in range(1, n + 1)]
+    results = [backend.add_frame(sc.t_ns(t), sc.imu_between(t - dt_s, t), see(t)) for t in times]
+    return RunLog(tuple(times), tuple(results), tuple(sc.true_state(t) for t in times))
 
 
 def start(sc: Scenario, t0_s: float = 0.0, seed_sigma_m: float | None = 0.02, config: VioConfig | None = None,
           init: VioInitialState | None = None) -> VioBackend:
+    """A back-end initialised at ``t0_s`` with the true state (and the landmarks seen there, with
+    ``seed_sigma_m`` noise; None: none), or with ``init``."""
     backend = VioBackend(VioConfig() if config is None else config, K_EUROC, sc.T_body_cam)
     est = backend.initialise(sc.initial(t0_s, seed_sigma_m) if init is None else init,
                              sc.imu_between(t0_s, t0_s + 0.1), sc.observe(t0_s))
     if not est.ok:
-        raise AssertionError(f"initialise failed: {est.status}")
+        raise RuntimeError(f"initialise failed: {est.status.value}")
     return backend
+
+
+__all__ = ["K_EUROC", "SIZE_WH", "START_NS", "RunLog", "Scenario", "box_points", "make_scenario", "run_frames",
+           "start"]
