@@ -124,7 +124,7 @@ class VioBackend:
             self._tracks.observe_pending(lm_id, 0, uv)
         triangulate_pending(self._tracks, obs, 0, {0: s.T_world_body @ self._cam.T_body_cam}, {0: 0}, self._cam,
                             self.cfg.visual, graph, values, stamps, [], self._seed_sigma_m)
-        smoother_update(self._smoother, graph, values, stamps, [])
+        smoother_update(self._smoother, graph, values, stamps, [], 0)
         self._values = self._smoother.calculateEstimate()
         self._window = [WindowFrame(0, s.t_ns, 0, True)]
         cov = np.diag(prior_sigmas_15(init.sigmas) ** 2)
@@ -210,7 +210,7 @@ class VioBackend:
             n_new = triangulate_pending(self._tracks, observations, k, cams, ordinals, self._cam, self.cfg.visual,
                                         graph, values, stamps, used, self._seed_sigma_m)
         try:
-            slots = smoother_update(self._smoother, graph, values, stamps, removed)
+            slots = smoother_update(self._smoother, graph, values, stamps, removed, k)
             for _ in range(self.cfg.iterations - 1):
                 self._smoother.update()
             self._values = self._smoother.calculateEstimate()

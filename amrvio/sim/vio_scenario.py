@@ -44,6 +44,22 @@ def box_points(lo: F64, hi: F64, n: int, rng: np.random.Generator) -> F64:
     return P
 
 
+def observe_points(T_world_cam: SE3, points: F64, rng: np.random.Generator, pixel_sigma: float = 0.5,
+                   max_obs: int = 150) -> VisualObservations:
+    """The points (P, 3) that a camera at ``T_world_cam`` (K_EUROC, 752 x 480, 5 px border) sees
+    0.3-30 m ahead, ids = row numbers, the ``max_obs`` lowest ids (so tracks persist), with
+    Gaussian pixel noise of ``pixel_sigma``."""
+    pc = (points - T_world_cam.t) @ T_world_cam.R
+    z = pc[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = K_EUROC[0, 0] * pc[:, 0] / z + K_EUROC[0, 2]
+        v = K_EUROC[1, 1] * pc[:, 1] / z + K_EUROC[1, 2]
+    vis = (z > 0.3) & (z < 30.0) & (u > 5) & (u < SIZE_WH[0] - 5) & (v > 5) & (v < SIZE_WH[1] - 5)
+    ids = np.flatnonzero(vis)[:max_obs]
+    uv = np.stack([u[ids], v[ids]], axis=1) + rng.normal(0.0, pixel_sigma, (ids.size, 2))
+    return VisualObservations(ids, uv)
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class Scenario:
     """A motion, its IMU (with the true biases), the landmarks (P, 3), the camera mount, the
@@ -74,19 +90,10 @@ class Scenario:
         """The IMU samples in [t0 - margin, t1 + margin]."""
         return self.syn.imu.window(self.t_ns(t0_s - margin_s), self.t_ns(t1_s + margin_s))
 
-    def observe(self, t_s: float, points: F64 | None = None, id_offset: int = 0) -> VisualObservations:
-        """Noisy pixels of the points the camera sees at ``t_s`` (the ``max_obs`` lowest ids)."""
-        P = self.points if points is None else points
+    def observe(self, t_s: float) -> VisualObservations:
+        """Noisy pixels of the points the camera sees at ``t_s`` (see :func:`observe_points`)."""
         T_wc = self.true_state(t_s).T_world_body @ self.T_body_cam
-        pc = (P - T_wc.t) @ T_wc.R
-        z = pc[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = K_EUROC[0, 0] * pc[:, 0] / z + K_EUROC[0, 2]
-            v = K_EUROC[1, 1] * pc[:, 1] / z + K_EUROC[1, 2]
-        vis = (z > 0.3) & (z < 30.0) & (u > 5) & (u < SIZE_WH[0] - 5) & (v > 5) & (v < SIZE_WH[1] - 5)
-        ids = np.flatnonzero(vis)[: self.max_obs]
-        uv = np.stack([u[ids], v[ids]], axis=1) + self.rng.normal(0.0, self.pixel_sigma, (ids.size, 2))
-        return VisualObservations(ids + id_offset, uv)
+        return observe_points(T_wc, self.points, self.rng, self.pixel_sigma, self.max_obs)
 
     def initial(self, t_s: float = 0.0, seed_sigma_m: float | None = None) -> VioInitialState:
         """The true state at ``t_s``; with ``seed_sigma_m``, also the points seen at ``t_s`` with
@@ -175,5 +182,5 @@ def start(sc: Scenario, t0_s: float = 0.0, seed_sigma_m: float | None = 0.02, co
     return backend
 
 
-__all__ = ["K_EUROC", "SIZE_WH", "START_NS", "RunLog", "Scenario", "box_points", "make_scenario", "run_frames",
-           "start"]
+__all__ = ["K_EUROC", "SIZE_WH", "START_NS", "RunLog", "Scenario", "box_points", "make_scenario", "observe_points",
+           "run_frames", "start"]
