@@ -135,7 +135,7 @@ def run(quick: bool) -> list[Row]:
 def _euroc_row() -> Row:
     """The back-end on EuRoC V1_01 40-60 s (the real-data test's setting), timed."""
     from amrvio.estimator.vio_types import VioInitialState
-    from amrvio.imu.preintegration import ImuBias, InertialState
+    from amrvio.imu.propagation import ImuBias, InertialState
     from amrvio.io.base import read_imu_csv
     from amrvio.io.calib import read_euroc_imu, read_euroc_sensor_T_BS
     from amrvio.io.trajectory import read_euroc_csv

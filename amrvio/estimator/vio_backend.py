@@ -20,7 +20,7 @@ One stage with a narrow interface, fed by the pipeline:
   with its growing uncertainty.
 
 The pipeline may give every frame to ``add_frame`` or only some (its own keyframes); IMU windows
-may overlap and overshoot (``amrvio.imu.preintegration.ImuBuffer``).
+may overlap and overshoot (``amrvio.imu.propagation.ImuBuffer``).
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ from amrvio.estimator.vio_types import (
     VisualObservations,
     VisualStats,
 )
-from amrvio.imu.preintegration import (
+from amrvio.imu.propagation import (
     ImuBuffer,
     InertialState,
     Preintegrator,

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ConfigError
-from amrvio.imu.preintegration import InertialState
+from amrvio.imu.propagation import InertialState
 from amrvio.types.sensors import ImuNoise
 
 F64 = NDArray[np.float64]

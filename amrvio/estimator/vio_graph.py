@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from amrvio.errors import ShapeError
 from amrvio.estimator.vio_types import PriorSigmas, VisualConfig
-from amrvio.imu.preintegration import InertialState, to_gtsam_bias, to_gtsam_pose
+from amrvio.imu.propagation import InertialState, to_gtsam_bias, to_gtsam_pose
 from amrvio.types.lie import SE3
 
 if TYPE_CHECKING:

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from amrvio.errors import ConfigError, ShapeError
 from amrvio.estimator.vio_checks import CheckConfig, ConsistencyReport
-from amrvio.imu.preintegration import InertialState
+from amrvio.imu.propagation import InertialState
 from amrvio.types.sensors import ImuNoise
 
 F64 = NDArray[np.float64]

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from amrvio.estimator.vio_backend import VioBackend
 from amrvio.estimator.vio_types import FrameResult, VioConfig, VioInitialState, VisualObservations
 from amrvio.geometry.align import umeyama
-from amrvio.imu.preintegration import ImuBias, InertialState
+from amrvio.imu.propagation import ImuBias, InertialState
 from amrvio.sim.imu_synth import SyntheticImu, synthesize_imu
 from amrvio.sim.kinematics import Motion
 from amrvio.sim.motion import default_T_body_cam, make_motion

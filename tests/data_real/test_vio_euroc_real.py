@@ -14,7 +14,7 @@ import pytest
 from amrvio.estimator.vio_backend import VioBackend
 from amrvio.estimator.vio_types import VioConfig, VioInitialState, VisualObservations
 from amrvio.geometry.align import umeyama
-from amrvio.imu.preintegration import (
+from amrvio.imu.propagation import (
     ImuBias,
     ImuBuffer,
     InertialState,

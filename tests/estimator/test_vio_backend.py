@@ -22,7 +22,7 @@ from amrvio.estimator.vio_types import (
     VisualConfig,
     VisualObservations,
 )
-from amrvio.imu.preintegration import InertialState
+from amrvio.imu.propagation import InertialState
 from amrvio.sim.vio_scenario import K_EUROC, START_NS, RunLog, Scenario, make_scenario, run_frames, start
 from amrvio.types.sensors import ImuData, ImuNoise
 

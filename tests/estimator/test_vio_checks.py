@@ -19,7 +19,7 @@ from amrvio.estimator.vio_checks import (
     check_scale,
     scale_ratio,
 )
-from amrvio.imu.preintegration import ImuBias, InertialState
+from amrvio.imu.propagation import ImuBias, InertialState
 from amrvio.types.lie import SE3, SO3
 from amrvio.types.sensors import ImuNoise
 

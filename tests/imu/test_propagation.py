@@ -1,4 +1,4 @@
-"""IMU preintegration and propagation (amrvio.imu.preintegration) against the simulator's exact
+"""IMU preintegration and propagation (amrvio.imu.propagation) against the simulator's exact
 kinematics, closed forms, and a Monte Carlo of the noise model."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from amrvio.errors import ShapeError
-from amrvio.imu.preintegration import (
+from amrvio.imu.propagation import (
     ImuBias,
     ImuBuffer,
     InertialState,
