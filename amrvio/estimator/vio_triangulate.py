@@ -1,0 +1,99 @@
+"""New landmarks for the VIO back-end: the pending tracks seen by a new keyframe are triangulated
+from the window's poses (all at once, :func:`amrvio.estimator.vio_landmarks.triangulate_tracks`)
+and enter the graph with every observation; and the parallax that makes a frame a keyframe."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amrvio.estimator.vio_graph import Camera, sym
+from amrvio.estimator.vio_landmarks import LandmarkTracks, triangulate_tracks
+from amrvio.estimator.vio_types import VisualConfig, VisualObservations
+from amrvio.types.lie import SE3
+
+if TYPE_CHECKING:
+    import gtsam
+
+F64 = NDArray[np.float64]
+
+
+def keyframe_parallax_deg(points_world: F64, center_a: F64, center_b: F64) -> float:
+    """Median over the points (N, 3) of the angle at the point between the two camera centres
+    (the parallax a translation from ``a`` to ``b`` makes, free of rotation); 0 without points."""
+    if points_world.shape[0] == 0:
+        return 0.0
+    da = points_world - center_a
+    db = points_world - center_b
+    cos = np.einsum("ni,ni->n", da, db) / (np.linalg.norm(da, axis=1) * np.linalg.norm(db, axis=1))
+    return float(np.degrees(np.median(np.arccos(np.clip(cos, -1.0, 1.0)))))
+
+
+def triangulate_pending(tracks: LandmarkTracks, obs: VisualObservations, k: int, cams: dict[int, SE3],
+                        ordinals: dict[int, int], cam: Camera, vis: VisualConfig, graph: gtsam.NonlinearFactorGraph,
+                        values: gtsam.Values,
+                        stamps: dict[int, float], used: list[tuple[int, F64]], seed_sigma_m: float) -> int:
+    """Landmarks from the pending tracks observed by keyframe ``k`` whose rays span
+    ``min_parallax_deg``, and from those the initialiser located (a seed: it needs one
+    observation, no parallax, and gets a prior of ``seed_sigma_m``); returns how many were created.
+
+    ``cams``: T_world_cam of every keyframe a pending observation refers to (frame ``k``: its
+    prediction); ``ordinals``: their smoother times. A new landmark's factors go into ``graph``,
+    its position (the initialiser's seed, else the triangulation) into ``values``, its smoother
+    time (its first keyframe's) into ``stamps``, and its observation at ``k`` into ``used``. A
+    track with the parallax that lands behind a camera, out of the depth range or further than
+    ``gate_px`` from one of its pixels is dropped (an outlier in it, or a point at infinity).
+    """
+    import gtsam
+
+    ids = [lm_id for lm_id in obs.ids.tolist()
+           if len(tracks.pending.get(lm_id, ())) >= (1 if lm_id in tracks.seeds else 2)
+           and tracks.pending[lm_id][-1][0] == k]
+    if not ids:
+        return 0
+    kfs = [kf for lm_id in ids for kf, _ in tracks.pending[lm_id]]
+    uv = np.array([uv for lm_id in ids for _, uv in tracks.pending[lm_id]])
+    track = np.repeat(np.arange(len(ids)), [len(tracks.pending[lm_id]) for lm_id in ids])
+    R = np.array([cams[kf].R for kf in kfs])
+    c = np.array([cams[kf].t for kf in kfs])
+    d = np.einsum("nij,nj->ni", R, np.c_[uv, np.ones(len(uv))] @ cam.K_inv.T)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    tri = triangulate_tracks(track, c, d, len(ids))
+    X = tri.points_world.copy()
+    seeded = np.array([lm_id in tracks.seeds for lm_id in ids])
+    for t in np.flatnonzero(seeded).tolist():
+        X[t] = tracks.seeds[ids[t]]
+    pc = np.einsum("nji,nj->ni", R, X[track] - c)  # R^T (X - c) per observation
+    z = pc[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        proj = np.stack([cam.K[0, 0] * pc[:, 0] / z + cam.K[0, 2], cam.K[1, 1] * pc[:, 1] / z + cam.K[1, 2]], 1)
+    err = np.nan_to_num(np.linalg.norm(proj - uv, axis=1), nan=np.inf)
+    bad = ~((z > vis.min_depth_m) & (z < vis.max_depth_m) & (err <= vis.gate_px))
+    track_bad = np.zeros(len(ids), dtype=bool)
+    np.logical_or.at(track_bad, track, bad)
+    ready = seeded | (tri.ok & (tri.parallax_deg >= vis.min_parallax_deg))
+    seed_noise = gtsam.noiseModel.Isotropic.Sigma(3, seed_sigma_m)
+    n_new = 0
+    for t in np.flatnonzero(ready).tolist():
+        lm_id = ids[t]
+        if track_bad[t]:
+            del tracks.pending[lm_id]
+            tracks.seeds.pop(lm_id, None)
+            continue
+        if seeded[t]:
+            graph.add(gtsam.PriorFactorPoint3(sym("l", tracks.next_key), X[t], seed_noise))
+        track_obs = tracks.pending[lm_id]
+        first = track_obs[0][0]
+        key = tracks.activate(lm_id, first)
+        values.insert(sym("l", key), np.asarray(X[t]))
+        stamps[sym("l", key)] = float(ordinals[first])
+        for kf, uv_i in track_obs:
+            graph.add(cam.factor(uv_i, kf, key))
+        used.append((key, track_obs[-1][1]))
+        n_new += 1
+    return n_new
+
+
+__all__ = ["keyframe_parallax_deg", "triangulate_pending"]
