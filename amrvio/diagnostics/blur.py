@@ -121,3 +121,10 @@ class BlurScorer:
                 self._sharp.append(max(self._not_sharp_run))
                 self._not_sharp_run.clear()
         return BlurResult(score, ref, ratio, ratio < cfg.blur_ratio)
+
+
+def no_signal(image: NDArray[np.uint8]) -> bool:
+    """True for an image without scene signal: dark (mean under 3 DN) with its 99th percentile
+    under 12 DN, on a 4x subsample (a covered lens shows only the sensor's read noise)."""
+    sub = image[::4, ::4]
+    return float(sub.mean()) < 3.0 and float(np.percentile(sub, 99)) < 12.0

@@ -181,6 +181,7 @@ class Initializer:
         xi = SE3.from_matrix(T1).log() / n_frames
         velocity = SE3.exp(np.asarray(xi, dtype=np.float64)).matrix()
         self._last = None
+        self.history = []  # these frames belong to this map now; a later attempt starts afresh
         return NewMap(kf0.kf_id, kf1.kf_id, T1.copy(), velocity, tuple(between))
 
     def _pose_between(self, fi: int, ids_f: I64, pts_f: F64, mapper: Mapper, T0: F64) -> FramePose:

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.config import PipelineConfig
-from amrvio.diagnostics.blur import BlurResult, BlurScorer, blur_score
+from amrvio.diagnostics.blur import BlurResult, BlurScorer, blur_score, no_signal
 from amrvio.diagnostics.frame import FrameDiagnostics, FrameHealth
 from amrvio.estimator.camera_height import HeightEstimate
 from amrvio.estimator.initializer import Initializer, InitResult
@@ -29,20 +29,13 @@ from amrvio.frontend.keyframe_policy import KeyframeReason
 from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, TrackOutcome
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
 from amrvio.pipeline.records import EstimatorReport, FrameRecord, PoseStatus
-from amrvio.pipeline.recovery import MapRecovery
+from amrvio.pipeline.recovery import MapRecovery, implausible_jump, link_to_previous
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import Sim3, se3_matrix_inverse
 from amrvio.types.sensors import ImuData
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
-
-
-def no_signal(image: U8) -> bool:
-    """True for an image without scene signal: dark (mean under 3 DN) with its 99th percentile
-    under 12 DN, on a 4x subsample (a covered lens shows only the sensor's read noise)."""
-    sub = image[::4, ::4]
-    return float(sub.mean()) < 3.0 and float(np.percentile(sub, 99)) < 12.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -246,6 +239,10 @@ class Pipeline:
         seg_id = len(self.mapping.segments) - 1
         tracks = self.tracker.tracks
         new = self.initializer.build(index, tracks, seg.mapper)
+        if seg_id > 0:  # placed by the points it shares with the previous map, when it can
+            seg, ev = link_to_previous(self.mapping.segments, seg_id, self.cfg.recovery.link,
+                                       self.cfg.seed)
+            events.append(ev)
         for fp in new.between:
             old = self.composer.anchors[fp.index]
             if fp.T_cam_kf0 is not None:
@@ -300,7 +297,8 @@ class Pipeline:
             found = self._try_reloc(len(self.mapping.segments) - 1, img, events, rep)
             if found is not None:
                 return found
-            lost = self._start(index, img, events, keep_tracks=False)
+            # the surviving tracks stay: they link the next map to this one
+            lost = self._start(index, img, events, keep_tracks=True)
             return dataclasses.replace(lost, tracking=dataclasses.replace(lost.tracking,
                                                                           outcome=TrackOutcome.LOST))
         if rep.outcome is TrackOutcome.DIRECT:
@@ -339,7 +337,11 @@ class Pipeline:
         if not reloc.ok or reloc.T_cam_world is None:
             events.append(f"reloc_failed:{reloc.status.value}:{reloc.n_matches}:{reloc.n_inliers}")
             return None
-        far = self._implausible_jump(segment, reloc.T_cam_world)
+        since = next((k for k, r in enumerate(reversed(self.records))
+                      if r.status is PoseStatus.TRACKED), len(self.records)) + 1
+        far = implausible_jump(reloc.T_cam_world, self.tracker.motion.T_last,
+                               self.mapping.segments[segment].world_from_segment.s,
+                               self.tracker.motion.typical_speed(), since)
         if far is not None:
             # a repeated structure (shelves, posters) can look like the place: a pose farther
             # from the last known one than the robot could have gone is refused
@@ -350,21 +352,6 @@ class Pipeline:
             rep = self.tracker.started_report()
         return self._relocalised(len(self.records), img, reloc.T_cam_world, reloc.point_ids,
                                  reloc.uv, rep, events)
-
-    def _implausible_jump(self, segment: int, T_cam_world: F64) -> float | None:
-        """The distance (global units) from the last known pose when it exceeds three times
-        what the recent speed covers in the frames since that pose (at least 5 frames' worth),
-        else None."""
-        T_last = self.tracker.motion.T_last
-        if T_last is None:
-            return None
-        since = next((k for k, r in enumerate(reversed(self.records))
-                      if r.status is PoseStatus.TRACKED), len(self.records)) + 1
-        c_new = -T_cam_world[:3, :3].T @ T_cam_world[:3, 3]
-        c_old = -T_last[:3, :3].T @ T_last[:3, 3]
-        dist = float(np.linalg.norm(c_new - c_old)) * self.mapping.segments[segment].world_from_segment.s
-        bound = 3.0 * self.tracker.motion.typical_speed() * max(since, 5)
-        return dist if dist > bound else None
 
     def _relocalised(self, index: int, img: U8, T_cam_world: F64, ids: NDArray[np.int64],
                      uv: F64, rep: TrackingReport, events: list[str]) -> _Step:

@@ -8,6 +8,7 @@ the segment that was lost until it is found again or a new map is initialised.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -15,7 +16,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.estimator.keyframe_db import KeyframeDatabase
+from amrvio.estimator.local_mapping import Segment
 from amrvio.estimator.relocalizer import RelocConfig, RelocResult, relocalize
+from amrvio.estimator.segment_link import LinkConfig, link_segments
 from amrvio.estimator.vo_map import VoMap
 
 F64 = NDArray[np.float64]
@@ -27,10 +30,11 @@ class RecoveryConfig:
     """``enabled``: try relocalisation after a loss; ``reloc``: its gates; ``max_features``:
     descriptors kept per keyframe; ``max_bridge_frames``: after this many frames without a
     usable image (blurred, dark), the map is searched by appearance before the motion model is
-    trusted again."""
+    trusted again; ``link``: placing a new map by the points it shares with the previous one."""
 
     enabled: bool = True
     max_bridge_frames: int = 5
+    link: LinkConfig = field(default_factory=LinkConfig)
     reloc: RelocConfig = field(default_factory=RelocConfig)
     max_features: int = 1500
 
@@ -76,4 +80,31 @@ class MapRecovery:
         return res
 
 
-__all__ = ["MapRecovery", "RecoveryConfig"]
+def implausible_jump(T_cam_world: F64, T_last: F64 | None, segment_scale: float,
+                     typical_speed: float, frames_since: int) -> float | None:
+    """The distance (global units) of a relocalised pose from the last known one when it
+    exceeds three times what the recent speed covers in the frames since (at least 5 frames'
+    worth), else None: a repeated structure (shelves, posters) can look like the place."""
+    if T_last is None:
+        return None
+    c_new = -T_cam_world[:3, :3].T @ T_cam_world[:3, 3]
+    c_old = -T_last[:3, :3].T @ T_last[:3, 3]
+    dist = float(np.linalg.norm(c_new - c_old)) * segment_scale
+    bound = 3.0 * typical_speed * max(frames_since, 5)
+    return dist if dist > bound else None
+
+
+def link_to_previous(segments: list[Segment], seg_id: int, config: LinkConfig,
+                     seed: int) -> tuple[Segment, str]:
+    """Place ``segments[seg_id]`` (a new map) in the world through the points it shares with the
+    previous segment (replacing it in the list when linked); the segment and an event string."""
+    seg, prev = segments[seg_id], segments[seg_id - 1]
+    link = link_segments(seg.mapper.map, prev.mapper.map, config, seed)
+    if link.old_from_new is None:
+        return seg, f"segment_link_failed:{link.n_common}:{link.n_inliers}"
+    linked = dataclasses.replace(seg, world_from_segment=prev.world_from_segment @ link.old_from_new)
+    segments[seg_id] = linked
+    return linked, f"segment_linked:{link.n_inliers}/{link.n_common}:s={link.old_from_new.s:.4g}"
+
+
+__all__ = ["MapRecovery", "RecoveryConfig", "implausible_jump", "link_to_previous"]
