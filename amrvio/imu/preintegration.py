@@ -42,14 +42,18 @@ def _ro(a: ArrayLike) -> F64:
     return out
 
 
-def so3_right_jacobian(phi: F64) -> F64:
-    """Right Jacobian J_r(phi) of SO3 (Forster eq. 8): Exp(phi + d) ~ Exp(phi) Exp(J_r d)."""
-    theta = float(np.linalg.norm(phi))
+def so3_right_jacobians(phis: F64) -> F64:
+    """Right Jacobians J_r(phi) of SO3 (Forster eq. 8), batched: (N, 3) -> (N, 3, 3).
+    Exp(phi + d) ~ Exp(phi) Exp(J_r d)."""
+    phi = np.asarray(phis, dtype=np.float64).reshape(-1, 3)
+    t = np.linalg.norm(phi, axis=1)
+    small = t < 1e-4
+    ts = np.where(small, 1.0, t)
+    t2 = t * t
+    b = np.where(small, 0.5 - t2 / 24.0, (1.0 - np.cos(ts)) / ts**2)
+    c = np.where(small, 1.0 / 6.0 - t2 / 120.0, (ts - np.sin(ts)) / ts**3)
     W = hat(phi)
-    if theta < 1e-5:
-        return np.eye(3) - 0.5 * W + (W @ W) / 6.0
-    return (np.eye(3) - (1.0 - np.cos(theta)) / theta**2 * W
-            + (theta - np.sin(theta)) / theta**3 * (W @ W))
+    return np.asarray(np.eye(3) - b[:, None, None] * W + c[:, None, None] * (W @ W))
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -120,53 +124,58 @@ def preintegrate(
     ba = np.asarray(accel_bias_m_s2, dtype=np.float64).reshape(3)
     t, gyro, accel = _resampled(imu, int(t0_ns), int(t1_ns))
     dts = np.diff(t)
-    w_mid = 0.5 * (gyro[1:] + gyro[:-1]) - bg
-    f_mid = 0.5 * (accel[1:] + accel[:-1]) - ba
-    steps = so3_exp(w_mid * dts[:, None])
-    half_steps = so3_exp(0.5 * w_mid * dts[:, None])
-    dR, dv, dp = np.eye(3), np.zeros(3), np.zeros(3)
-    jR_g = np.zeros((3, 3))
-    jv_g, jv_a = np.zeros((3, 3)), np.zeros((3, 3))
-    jp_g, jp_a = np.zeros((3, 3)), np.zeros((3, 3))
-    cov = np.zeros((9, 9))
-    qg = qa = 0.0
-    if noise is not None:
-        qg, qa = noise.gyro_noise_density**2, noise.accel_noise_density**2
-    A = np.eye(9)
-    B = np.zeros((9, 6))
-    for j in range(dts.shape[0]):
-        dt = float(dts[j])
-        if dt <= 0.0:
-            continue
-        f, step = f_mid[j], steps[j]
-        Jr = so3_right_jacobian(w_mid[j] * dt)
-        R_mid = dR @ half_steps[j]  # the rotation at mid-step: second order in the step
-        Rf_hat = R_mid @ hat(f)
-        if noise is not None:  # Forster eq. 63: state [dphi, dv, dp]
-            A[0:3, 0:3] = step.T
-            A[3:6, 0:3] = -Rf_hat * dt
-            A[6:9, 0:3] = -0.5 * Rf_hat * dt * dt
-            A[6:9, 3:6] = np.eye(3) * dt
-            B[0:3, 0:3] = Jr * dt
-            B[3:6, 3:6] = R_mid * dt
-            B[6:9, 3:6] = 0.5 * R_mid * dt * dt
-            Q = np.diag(np.r_[np.full(3, qg / dt), np.full(3, qa / dt)])
-            cov = A @ cov @ A.T + B @ Q @ B.T
-        # Bias Jacobians (Forster appendix B, at mid-step), old values on the right-hand side.
-        jR_mid = half_steps[j].T @ jR_g - so3_right_jacobian(0.5 * w_mid[j] * dt) * (0.5 * dt)
-        jp_g = jp_g + jv_g * dt - 0.5 * Rf_hat @ jR_mid * dt * dt
-        jp_a = jp_a + jv_a * dt - 0.5 * R_mid * dt * dt
-        jv_g = jv_g - Rf_hat @ jR_mid * dt
-        jv_a = jv_a - R_mid * dt
-        jR_g = step.T @ jR_g - Jr * dt
-        dp = dp + dv * dt + 0.5 * (R_mid @ f) * dt * dt
-        dv = dv + (R_mid @ f) * dt
-        dR = dR @ step
+    keep = dts > 0.0
+    dts = dts[keep]
+    w = (0.5 * (gyro[1:] + gyro[:-1]) - bg)[keep]
+    f = (0.5 * (accel[1:] + accel[:-1]) - ba)[keep]
+    n = dts.shape[0]
+    steps = so3_exp(w * dts[:, None])
+    halves = so3_exp(0.5 * w * dts[:, None])
+    Rs = np.empty((n + 1, 3, 3))  # Rs[j]: the rotation before step j
+    Rs[0] = np.eye(3)
+    for j in range(n):
+        Rs[j + 1] = Rs[j] @ steps[j]
+    R_mid = Rs[:-1] @ halves  # the rotation at mid-step: second order in the step
+    acc = np.einsum("nij,nj->ni", R_mid, f)
+    dt1, dt2 = dts[:, None], (dts * dts)[:, None]
+    dv_before = np.cumsum(acc * dt1, axis=0) - acc * dt1
+    dv = dv_before[-1] + acc[-1] * dts[-1]
+    dp = np.sum(dv_before * dt1 + 0.5 * acc * dt2, axis=0)
+    # Bias Jacobians (Forster appendix B) in closed form: before step j,
+    # dR/db_g = -R_j^T sum_{k<j} R_{k+1} J_r,k dt_k, and dv, dp by sums over the steps.
+    Jr = so3_right_jacobians(w * dts[:, None])
+    terms = np.einsum("nij,njk->nik", Rs[1:], Jr) * dts[:, None, None]
+    S_before = np.cumsum(terms, axis=0) - terms
+    jR_before = -np.einsum("nji,njk->nik", Rs[:-1], S_before)
+    jR_g = -Rs[-1].T @ np.sum(terms, axis=0)
+    jR_mid = (np.einsum("nji,njk->nik", halves, jR_before)
+              - so3_right_jacobians(0.5 * w * dts[:, None]) * (0.5 * dts)[:, None, None])
+    Rf_hat = R_mid @ hat(f)
+    Mg = Rf_hat @ jR_mid
+    d3 = dts[:, None, None]
+    jv_g_before = -(np.cumsum(Mg * d3, axis=0) - Mg * d3)
+    jv_a_before = -(np.cumsum(R_mid * d3, axis=0) - R_mid * d3)
     d_bias = np.zeros((9, 6))
     d_bias[0:3, 0:3] = jR_g
-    d_bias[3:6, 0:3], d_bias[3:6, 3:6] = jv_g, jv_a
-    d_bias[6:9, 0:3], d_bias[6:9, 3:6] = jp_g, jp_a
-    return Preintegrated(int(t0_ns), int(t1_ns), _ro(dR), _ro(dv), _ro(dp), _ro(bg), _ro(ba),
+    d_bias[3:6, 0:3] = jv_g_before[-1] - Mg[-1] * dts[-1]
+    d_bias[3:6, 3:6] = jv_a_before[-1] - R_mid[-1] * dts[-1]
+    d_bias[6:9, 0:3] = np.sum(jv_g_before * d3 - 0.5 * Mg * d3 * d3, axis=0)
+    d_bias[6:9, 3:6] = np.sum(jv_a_before * d3 - 0.5 * R_mid * d3 * d3, axis=0)
+    cov = np.zeros((9, 9))
+    if noise is not None:  # Forster eq. 63, state [dphi, dv, dp]; per-step noise density^2 / dt
+        A = np.tile(np.eye(9), (n, 1, 1))
+        A[:, 0:3, 0:3] = np.transpose(steps, (0, 2, 1))
+        A[:, 3:6, 0:3] = -Rf_hat * d3
+        A[:, 6:9, 0:3] = -0.5 * Rf_hat * d3 * d3
+        A[:, 6:9, 3:6] = np.eye(3) * d3
+        Bg = Jr * d3  # rows 0:3
+        Ba = np.concatenate([R_mid * d3, 0.5 * R_mid * d3 * d3], axis=1)  # rows 3:9
+        Q = np.zeros((n, 9, 9))
+        Q[:, 0:3, 0:3] = np.einsum("nij,nkj->nik", Bg, Bg) * (noise.gyro_noise_density**2 / d3)
+        Q[:, 3:9, 3:9] = np.einsum("nij,nkj->nik", Ba, Ba) * (noise.accel_noise_density**2 / d3)
+        for j in range(n):
+            cov = A[j] @ cov @ A[j].T + Q[j]
+    return Preintegrated(int(t0_ns), int(t1_ns), _ro(Rs[-1]), _ro(dv), _ro(dp), _ro(bg), _ro(ba),
                          _ro(d_bias), _ro(cov))
 
 

@@ -1,0 +1,284 @@
+"""MAP refinement of the visual-inertial initialisation, and its marginal covariance.
+
+A small batch problem over the window (the inertial optimisation of Campos et al. 2021, ORB-SLAM3,
+section V-B, with the VO poses as noisy measurements instead of fixed). Unknowns: the scale s,
+gravity ``G Exp(B w) g_dir`` (2 degrees of freedom on its sphere, re-anchored every iteration), per
+keyframe the body rotation ``R_k`` (a right perturbation of the VO's), position ``p_k`` and velocity
+``v_k`` (VO frame, metric), and the biases. Residuals:
+
+- VO rotation, per keyframe: ``Log(Rvo_k^T R_k)``;
+- VO position, per keyframe, in VO units: ``(p_k + R_k t_body_cam) / s - c_k`` (the keyframe
+  positions' noise is additive there and does not shrink the scale);
+- IMU, per interval (Forster et al. 2017, eq. 45):
+  ``Log(dR(b_g)^T R_k^T R_{k+1})``, ``R_k^T (v_{k+1} - v_k - g T) - dv(b)``,
+  ``R_k^T (p_{k+1} - p_k - v_k T - g T^2 / 2) - dp(b)``;
+- Gaussian priors on both biases.
+
+The three groups have unknown variances: VO rotation and position noise, and a factor (>= 1) on
+the IMU's preintegration covariance (vibration, scale-factor error). They are estimated from the
+residuals by variance component estimation (Forstner 1979: a group's variance factor is its
+whitened residual square sum over its redundancy), re-solved until they settle. Gauss-Newton; the
+covariance is the inverse of the whitened normal matrix.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg, sparse
+
+from amrvio.estimator.vi_init_linear import ViProblem, tangent_basis
+from amrvio.types.lie import hat, so3_exp, so3_log
+
+F64 = NDArray[np.float64]
+
+MIN_ROTATION_VAR = (math.radians(0.001)) ** 2  # floors of the VO noise variances (rad^2, m^2 metric)
+MIN_POSITION_VAR = (1e-5) ** 2
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MapState:
+    """A point of the MAP problem: scale, gravity (3,) m/s^2, body rotations (K, 3, 3), positions
+    and velocities (K, 3) metric in the VO frame, biases (3,)."""
+
+    scale: float
+    gravity_vo: F64
+    R_vo_body: F64
+    p_vo: F64
+    velocities_vo: F64
+    gyro_bias: F64
+    accel_bias: F64
+
+
+@dataclass(frozen=True, slots=True)
+class NoiseModel:
+    """rotation_var (rad^2) and position_var (VO units^2) of a VO keyframe, per component, and the
+    factor on the IMU's preintegration covariance."""
+
+    rotation_var: float
+    position_var: float
+    imu_factor: float = 1.0
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MapResult:
+    """state; covariance (n, n) of [s, w, (theta_k, p_k, v_k)..., b_g, b_a]; chi2_per_dof; noise:
+    the settled variance components; iterations (Gauss-Newton, all rounds)."""
+
+    state: MapState
+    covariance: F64
+    chi2_per_dof: float
+    noise: NoiseModel
+    iterations: int
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class BiasPriors:
+    """Means and standard deviations (3,) of the bias priors."""
+
+    gyro_mean: F64
+    gyro_std: F64
+    accel_mean: F64
+    accel_std: F64
+
+
+def index_bias(K: int) -> int:
+    """Column of b_g in the unknowns (b_a follows)."""
+    return 3 + 9 * K
+
+
+def _imu_whiteners(problem: ViProblem, factor: float) -> F64:
+    out = np.empty((len(problem.pre), 9, 9))
+    for k, p in enumerate(problem.pre):
+        C = factor * np.asarray(p.covariance) + np.eye(9) * 1e-16
+        out[k] = np.linalg.inv(np.linalg.cholesky(C))
+    return out
+
+
+def _linearise(problem: ViProblem, st: MapState) -> tuple[F64, F64, F64, F64, F64]:
+    """Unwhitened residuals and Jacobians: VO rotation (K, 3) with Jacobian blocks implicit (I at
+    theta_k), VO position (K, 3) and (K, 3, n), IMU (M, 9) and (M, 9, n)."""
+    K = problem.n_keyframes
+    n = 3 + 9 * K + 6
+    ib = index_bias(K)
+    s, g, R, P, V = st.scale, st.gravity_vo, st.R_vo_body, st.p_vo, st.velocities_vo
+    G = float(np.linalg.norm(g))
+    g_dir = g / G
+    dg_dw = -G * hat(g_dir) @ tangent_basis(g_dir)
+    r_rot = so3_log(np.einsum("nji,njk->nik", problem.R_vo_body, R))
+    cam = P + np.einsum("nij,j->ni", R, problem.t_body_cam)
+    r_pos = cam / s - problem.c_vo
+    J_pos = np.zeros((K, 3, n))
+    J_pos[:, :, 0] = -cam / (s * s)
+    t_hat = hat(problem.t_body_cam)
+    for k in range(K):
+        J_pos[k, :, 3 + 9 * k:6 + 9 * k] = -R[k] @ t_hat / s
+        J_pos[k, :, 6 + 9 * k:9 + 9 * k] = np.eye(3) / s
+    M = len(problem.pre)
+    T = np.array([p.dt_s for p in problem.pre])
+    T1 = T[:, None]
+    dB = np.stack([p.d_bias for p in problem.pre])  # (M, 9, 6)
+    db = np.concatenate([st.gyro_bias - problem.pre[0].gyro_bias_rad_s,
+                         st.accel_bias - problem.pre[0].accel_bias_m_s2])
+    corr = dB @ db  # first-order bias correction (Forster eq. 44), all intervals at one bias
+    dR = np.einsum("mij,mjk->mik", np.stack([p.delta_R for p in problem.pre]), so3_exp(corr[:, 0:3]))
+    dv = np.stack([p.delta_v for p in problem.pre]) + corr[:, 3:6]
+    dp = np.stack([p.delta_p for p in problem.pre]) + corr[:, 6:9]
+    Rt = np.transpose(R[:-1], (0, 2, 1))
+    rel = Rt @ R[1:]
+    a_v = np.einsum("mij,mj->mi", Rt, V[1:] - V[:-1] - g * T1)
+    a_p = np.einsum("mij,mj->mi", Rt, P[1:] - P[:-1] - V[:-1] * T1 - 0.5 * g * T1 * T1)
+    r_imu = np.concatenate([so3_log(np.einsum("mji,mjk->mik", dR, rel)), a_v - dv, a_p - dp], axis=1)
+    J_imu = np.zeros((M, 9, n))
+    T3 = T[:, None, None]
+    eye = np.broadcast_to(np.eye(3), (M, 3, 3))
+    idx = 3 + 9 * np.arange(M)  # theta_k; p_k at +3, v_k at +6; keyframe k+1 from +9
+    rows = np.arange(M)[:, None, None]
+
+    def put(r0: int, col0: NDArray[np.int64], block: F64) -> None:
+        """J_imu[k, r0:r0+3, col0[k]:col0[k]+3] = block[k] for every interval k."""
+        J_imu[rows, np.arange(r0, r0 + 3)[None, :, None], col0[:, None, None] + np.arange(3)[None, None, :]] = block
+    put(0, idx, -np.transpose(rel, (0, 2, 1)))
+    put(0, idx + 9, eye)
+    put(3, idx, hat(a_v))
+    put(3, idx + 6, -Rt)
+    put(3, idx + 15, Rt)
+    put(6, idx, hat(a_p))
+    put(6, idx + 3, -Rt)
+    put(6, idx + 12, Rt)
+    put(6, idx + 6, -Rt * T3)
+    J_imu[:, 3:6, 1:3] = -(Rt @ dg_dw) * T3
+    J_imu[:, 6:9, 1:3] = -0.5 * (Rt @ dg_dw) * T3 * T3
+    J_imu[:, 0:3, ib:ib + 3] = -dB[:, 0:3, 0:3]
+    J_imu[:, 3:9, ib:ib + 6] = -dB[:, 3:9]
+    return r_rot, r_pos, J_pos, r_imu, J_imu
+
+
+def _system(problem: ViProblem, st: MapState, nm: NoiseModel, W_imu: F64,
+            pri: BiasPriors) -> tuple[F64, F64, list[slice]]:
+    """Whitened residual (m,), Jacobian (m, n) and the row slices of the groups [VO rotation, VO
+    position, IMU, priors]."""
+    r_rot, r_pos, J_pos, r_imu, J_imu = _linearise(problem, st)
+    K, n = problem.n_keyframes, J_pos.shape[2]
+    J_rot = np.zeros((3 * K, n))
+    for k in range(K):
+        J_rot[3 * k:3 * k + 3, 3 + 9 * k:6 + 9 * k] = np.eye(3)
+    a, b = 1.0 / math.sqrt(nm.rotation_var), 1.0 / math.sqrt(nm.position_var)
+    ri = np.einsum("mij,mj->mi", W_imu, r_imu).reshape(-1)
+    Ji = np.einsum("mij,mjn->min", W_imu, J_imu).reshape(-1, n)
+    ib = index_bias(K)
+    Jp = np.zeros((6, n))
+    Jp[0:3, ib:ib + 3] = np.diag(1.0 / pri.gyro_std)
+    Jp[3:6, ib + 3:ib + 6] = np.diag(1.0 / pri.accel_std)
+    rp = np.concatenate([(st.gyro_bias - pri.gyro_mean) / pri.gyro_std,
+                         (st.accel_bias - pri.accel_mean) / pri.accel_std])
+    r = np.concatenate([a * r_rot.reshape(-1), b * r_pos.reshape(-1), ri, rp])
+    J = np.vstack([a * J_rot, b * J_pos.reshape(-1, n), Ji, Jp])
+    edges = np.cumsum([0, 3 * K, 3 * K, ri.shape[0], 6])
+    return r, J, [slice(int(edges[i]), int(edges[i + 1])) for i in range(4)]
+
+
+def _step(st: MapState, dx: F64) -> MapState:
+    K = st.velocities_vo.shape[0]
+    G = float(np.linalg.norm(st.gravity_vo))
+    g_dir = st.gravity_vo / G
+    blocks = dx[3:3 + 9 * K].reshape(K, 9)
+    ib = index_bias(K)
+    return MapState(
+        scale=st.scale + float(dx[0]),
+        gravity_vo=G * (so3_exp(tangent_basis(g_dir) @ dx[1:3]) @ g_dir),
+        R_vo_body=np.einsum("nij,njk->nik", st.R_vo_body, so3_exp(blocks[:, 0:3])),
+        p_vo=st.p_vo + blocks[:, 3:6],
+        velocities_vo=st.velocities_vo + blocks[:, 6:9],
+        gyro_bias=st.gyro_bias + dx[ib:ib + 3],
+        accel_bias=st.accel_bias + dx[ib + 3:ib + 6],
+    )
+
+
+def _gauss_newton(problem: ViProblem, st: MapState, nm: NoiseModel, pri: BiasPriors,
+                  max_iter: int) -> tuple[MapState, F64, F64, list[slice], int]:
+    """Returns (state, whitened residual, whitened Jacobian at the state, groups, iterations)."""
+    W_imu = _imu_whiteners(problem, nm.imu_factor)
+    r, J, groups = _system(problem, st, nm, W_imu, pri)
+    cost = float(r @ r)
+    it = 0
+    for _ in range(max_iter):
+        it += 1
+        dx = _normal_solve(J, r)
+        step, accepted = 1.0, False
+        while step > 1e-3:
+            cand = _step(st, step * dx)
+            r_c, J_c, _ = _system(problem, cand, nm, W_imu, pri)
+            if float(r_c @ r_c) <= cost:
+                accepted = True
+                break
+            step *= 0.5
+        if not accepted:
+            break  # no decrease along the Gauss-Newton direction: at the minimum to noise level
+        gain = cost - float(r_c @ r_c)
+        st, r, J, cost = cand, r_c, J_c, float(r_c @ r_c)
+        if gain < 1e-10 * max(cost, 1.0):
+            break
+    return st, r, J, groups, it
+
+
+def _normal_matrix(J: F64) -> F64:
+    """J^T J through a sparse product (J is mostly zeros: each row touches two keyframes)."""
+    Js = sparse.csr_matrix(J)
+    return np.asarray((Js.T @ Js).toarray())
+
+
+def _normal_solve(J: F64, r: F64) -> F64:
+    """The Gauss-Newton step: argmin |J dx + r|, by the column-equilibrated normal equations."""
+    N = _normal_matrix(J)
+    d = np.sqrt(np.maximum(np.diag(N), 1e-300))
+    Ns = N / np.outer(d, d)
+    g = -(J.T @ r) / d
+    try:
+        y = linalg.cho_solve(linalg.cho_factor(Ns), g)
+    except linalg.LinAlgError:  # singular: the minimum-norm step
+        y = np.linalg.lstsq(Ns, g, rcond=None)[0]
+    return np.asarray(y / d)
+
+
+def covariance(J: F64) -> F64:
+    """(J^T J)^-1 (pseudo-inverse when singular), column-equilibrated."""
+    N = _normal_matrix(J)
+    d = np.sqrt(np.maximum(np.diag(N), 1e-300))
+    return np.asarray(np.linalg.pinv(N / np.outer(d, d), hermitian=True) / np.outer(d, d))
+
+
+def _redundancies(J: F64, groups: list[slice]) -> list[float]:
+    """Sum of (1 - leverage) over each group's rows: the group's share of the redundancy."""
+    Ninv = covariance(J)
+    h = np.sum((sparse.csr_matrix(J) @ Ninv) * J, axis=1)
+    return [float(np.sum(1.0 - h[g])) for g in groups]
+
+
+def refine_map(problem: ViProblem, start: MapState, pri: BiasPriors, noise: NoiseModel,
+               rounds: int = 6, max_iter: int = 15) -> MapResult:
+    """Gauss-Newton from ``start``; between rounds the variance components are re-estimated
+    (module docstring), until every factor is within 10 % of 1."""
+    nm = replace(noise, rotation_var=max(noise.rotation_var, MIN_ROTATION_VAR),
+                 position_var=max(noise.position_var, MIN_POSITION_VAR / start.scale**2),
+                 imu_factor=max(noise.imu_factor, 1.0))
+    st, total = start, 0
+    settled = False
+    for rnd in range(rounds + 1):
+        st, r, J, groups, it = _gauss_newton(problem, st, nm, pri, max_iter)
+        total += it
+        if settled or rnd == rounds:
+            break
+        red = _redundancies(J, groups)
+        f = [float(r[g] @ r[g]) / max(u, 1e-9) for g, u in zip(groups[:3], red[:3], strict=True)]
+        settled = all(abs(math.log(max(x, 1e-12))) < 0.1 for x in f)
+        nm = NoiseModel(max(MIN_ROTATION_VAR, nm.rotation_var * f[0]),
+                        max(MIN_POSITION_VAR / st.scale**2, nm.position_var * f[1]),
+                        max(1.0, nm.imu_factor * f[2]))
+    dof = max(r.shape[0] - J.shape[1], 1)
+    chi2 = float(r @ r) / dof
+    cov = covariance(J) * max(1.0, chi2)
+    return MapResult(st, cov, chi2, nm, total)
