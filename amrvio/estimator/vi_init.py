@@ -42,6 +42,7 @@ from amrvio.estimator.vi_init_linear import (
     solve_free_gravity,
     solve_gyro_bias,
     solve_inverse_scale,
+    vo_position_var,
     whiteners,
 )
 from amrvio.estimator.vi_init_map import (
@@ -210,16 +211,18 @@ def _solve(problem: ViProblem, cfg: ViInitConfig, pri: BiasPriors, bg: F64, rot_
     with_ba = solve_inverse_scale(problem, bg, W, sphere.scale, sphere.gravity_vo, G, (pri.accel_mean, pri.accel_std))
     if not 0.0 < with_ba.scale < math.inf:
         return _done(S.NEGATIVE_SCALE if status is S.OK else status, cfg, ex, fig)
-    # first noise guesses: an interval's residual holds two keyframes' noise
+    # VO rotation noise: a first guess (an interval's residual holds two keyframes' noise);
+    # VO position noise: from three-keyframe residuals, kept
     noise0 = NoiseModel(rotation_var=max(0.0, float(np.mean(rot_err**2)) - imu_rot) / 2.0,
-                        position_var=max(0.0, pos_var - imu_pos) / 2.0 / with_ba.scale**2)
+                        position_var=max(MIN_POSITION_VAR / with_ba.scale**2, vo_position_var(
+                            problem, bg, with_ba.accel_bias, with_ba.scale, with_ba.gravity_vo)))
     start = MapState(with_ba.scale, with_ba.gravity_vo, problem.R_vo_body,
                      with_ba.scale * problem.c_vo + problem.lever_vo, with_ba.velocities_vo, bg, with_ba.accel_bias)
     mp = refine_map(problem, start, pri, noise0)
     state = _state(mp, stamps_ns)
     fig = dataclasses.replace(fig, vo_position_sigma_m=math.sqrt(mp.noise.position_var) * mp.state.scale,
                               vo_rotation_sigma_deg=math.degrees(math.sqrt(mp.noise.rotation_var)),
-                              imu_noise_factor=mp.noise.imu_factor, chi2_per_dof=mp.chi2_per_dof,
+                              accel_noise_factor=mp.noise.accel_factor, chi2_per_dof=mp.chi2_per_dof,
                               iterations=mp.iterations)
     g = cfg.gates
     if status is S.OK:

@@ -235,6 +235,35 @@ def solve_inverse_scale(
     return sol
 
 
+def vo_position_var(problem: ViProblem, gyro_bias: F64, accel_bias: F64, scale: float, gravity_vo: F64) -> float:
+    """The VO keyframes' position noise variance (per component, VO units) from three consecutive
+    keyframes, with the velocities eliminated (Mur-Artal and Tardos 2017, eq. 19): the residual
+
+        e_k = (s dc_k + dl_k - g T_k^2/2 - R_k dp_k) / T_k
+              - (s dc_{k-1} + dl_{k-1} - g T_{k-1}^2/2 - R_{k-1} dp_{k-1}) / T_{k-1}
+              - g T_{k-1} - R_{k-1} dv_{k-1}
+
+    holds the VO noise as s (n_{k+1} - n_k) / T_k - s (n_k - n_{k-1}) / T_{k-1} and the IMU's
+    error over two intervals only, which is small beside it: unlike a residual of the full window,
+    it does not depend on how noisy the IMU is over seconds. Its spread about its mean (a wrong
+    gravity or bias is nearly constant) gives the variance."""
+    M = len(problem.pre)
+    if M < 3:
+        return 0.0
+    R, dc, dl = problem.R_vo_body, np.diff(problem.c_vo, axis=0), np.diff(problem.lever_vo, axis=0)
+    T = np.array([p.dt_s for p in problem.pre])
+    dv = np.empty((M, 3))
+    dp = np.empty((M, 3))
+    for k, p in enumerate(problem.pre):
+        _, dv[k], dp[k] = p.corrected(gyro_bias, accel_bias)
+    disp = (scale * dc + dl - 0.5 * gravity_vo * (T * T)[:, None] - np.einsum("mij,mj->mi", R[:-1], dp)) / T[:, None]
+    e = disp[1:] - disp[:-1] - gravity_vo * T[:-1, None] - np.einsum("mij,mj->mi", R[:-2], dv[:-1])
+    gain = 1.0 / T[1:] ** 2 + (1.0 / T[1:] + 1.0 / T[:-1]) ** 2 + 1.0 / T[:-1] ** 2
+    dev = e - e.mean(axis=0)
+    n = dev.shape[0]
+    return float(np.mean(dev**2 / gain[:, None]) * n / max(n - 1, 1)) / scale**2
+
+
 def rotation_range(R_vo_cam: F64) -> tuple[float, F64]:
     """(largest angle between two orientations in degrees, (3,) range of the rotation vector of
     R_cam0^T R_camk about the first camera's axes in degrees)."""

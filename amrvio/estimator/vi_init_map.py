@@ -14,10 +14,14 @@ keyframe the body rotation ``R_k`` (a right perturbation of the VO's), position 
   ``R_k^T (p_{k+1} - p_k - v_k T - g T^2 / 2) - dp(b)``;
 - Gaussian priors on both biases.
 
-The three groups have unknown variances: VO rotation and position noise, and a factor (>= 1) on
-the IMU's preintegration covariance (vibration, scale-factor error). They are estimated from the
-residuals by variance component estimation (Forstner 1979: a group's variance factor is its
-whitened residual square sum over its redundancy), re-solved until they settle. Gauss-Newton; the
+The VO position noise is given (estimated beforehand from three-keyframe residuals, which the
+IMU's slow errors do not reach: estimated jointly, it trades off against the accelerometer's noise
+and the scale drifts with the trade). The three other groups have unknown variances: VO rotation
+noise, and factors (>= 1) on the IMU's preintegrated rotation covariance (gyro) and
+velocity-position covariance (accelerometer: vibration, bias drift; the two are whitened apart).
+They are estimated from the residuals by variance component estimation (Forstner 1979: a
+group's variance factor is its whitened residual square sum over its redundancy), re-solved until
+they settle. Gauss-Newton; the
 covariance is the inverse of the whitened normal matrix.
 """
 
@@ -56,11 +60,13 @@ class MapState:
 @dataclass(frozen=True, slots=True)
 class NoiseModel:
     """rotation_var (rad^2) and position_var (VO units^2) of a VO keyframe, per component, and the
-    factor on the IMU's preintegration covariance."""
+    factors (>= 1) on the IMU's preintegrated rotation covariance (gyro) and velocity-position
+    covariance (accelerometer)."""
 
     rotation_var: float
     position_var: float
-    imu_factor: float = 1.0
+    gyro_factor: float = 1.0
+    accel_factor: float = 1.0
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -90,11 +96,14 @@ def index_bias(K: int) -> int:
     return 3 + 9 * K
 
 
-def _imu_whiteners(problem: ViProblem, factor: float) -> F64:
-    out = np.empty((len(problem.pre), 9, 9))
+def _imu_whiteners(problem: ViProblem, nm: NoiseModel) -> F64:
+    """(M, 9, 9) block-diagonal: the rotation rows and the velocity-position rows are whitened
+    apart (their cross-covariance dropped), each with its own factor."""
+    out = np.zeros((len(problem.pre), 9, 9))
     for k, p in enumerate(problem.pre):
-        C = factor * np.asarray(p.covariance) + np.eye(9) * 1e-16
-        out[k] = np.linalg.inv(np.linalg.cholesky(C))
+        C = np.asarray(p.covariance)
+        out[k, 0:3, 0:3] = np.linalg.inv(np.linalg.cholesky(nm.gyro_factor * C[0:3, 0:3] + np.eye(3) * 1e-18))
+        out[k, 3:9, 3:9] = np.linalg.inv(np.linalg.cholesky(nm.accel_factor * C[3:9, 3:9] + np.eye(6) * 1e-18))
     return out
 
 
@@ -160,25 +169,27 @@ def _linearise(problem: ViProblem, st: MapState) -> tuple[F64, F64, F64, F64, F6
 def _system(problem: ViProblem, st: MapState, nm: NoiseModel, W_imu: F64,
             pri: BiasPriors) -> tuple[F64, F64, list[slice]]:
     """Whitened residual (m,), Jacobian (m, n) and the row slices of the groups [VO rotation, VO
-    position, IMU, priors]."""
+    position, IMU rotation, IMU velocity-position, priors]."""
     r_rot, r_pos, J_pos, r_imu, J_imu = _linearise(problem, st)
     K, n = problem.n_keyframes, J_pos.shape[2]
     J_rot = np.zeros((3 * K, n))
     for k in range(K):
         J_rot[3 * k:3 * k + 3, 3 + 9 * k:6 + 9 * k] = np.eye(3)
     a, b = 1.0 / math.sqrt(nm.rotation_var), 1.0 / math.sqrt(nm.position_var)
-    ri = np.einsum("mij,mj->mi", W_imu, r_imu).reshape(-1)
-    Ji = np.einsum("mij,mjn->min", W_imu, J_imu).reshape(-1, n)
+    ri = np.einsum("mij,mj->mi", W_imu, r_imu)
+    Ji = np.einsum("mij,mjn->min", W_imu, J_imu)
     ib = index_bias(K)
     Jp = np.zeros((6, n))
     Jp[0:3, ib:ib + 3] = np.diag(1.0 / pri.gyro_std)
     Jp[3:6, ib + 3:ib + 6] = np.diag(1.0 / pri.accel_std)
     rp = np.concatenate([(st.gyro_bias - pri.gyro_mean) / pri.gyro_std,
                          (st.accel_bias - pri.accel_mean) / pri.accel_std])
-    r = np.concatenate([a * r_rot.reshape(-1), b * r_pos.reshape(-1), ri, rp])
-    J = np.vstack([a * J_rot, b * J_pos.reshape(-1, n), Ji, Jp])
-    edges = np.cumsum([0, 3 * K, 3 * K, ri.shape[0], 6])
-    return r, J, [slice(int(edges[i]), int(edges[i + 1])) for i in range(4)]
+    r = np.concatenate([a * r_rot.reshape(-1), b * r_pos.reshape(-1), ri[:, 0:3].reshape(-1),
+                        ri[:, 3:9].reshape(-1), rp])
+    J = np.vstack([a * J_rot, b * J_pos.reshape(-1, n), Ji[:, 0:3].reshape(-1, n), Ji[:, 3:9].reshape(-1, n), Jp])
+    M = r_imu.shape[0]
+    edges = np.cumsum([0, 3 * K, 3 * K, 3 * M, 6 * M, 6])
+    return r, J, [slice(int(edges[i]), int(edges[i + 1])) for i in range(5)]
 
 
 def _step(st: MapState, dx: F64) -> MapState:
@@ -201,7 +212,7 @@ def _step(st: MapState, dx: F64) -> MapState:
 def _gauss_newton(problem: ViProblem, st: MapState, nm: NoiseModel, pri: BiasPriors,
                   max_iter: int) -> tuple[MapState, F64, F64, list[slice], int]:
     """Returns (state, whitened residual, whitened Jacobian at the state, groups, iterations)."""
-    W_imu = _imu_whiteners(problem, nm.imu_factor)
+    W_imu = _imu_whiteners(problem, nm)
     r, J, groups = _system(problem, st, nm, W_imu, pri)
     cost = float(r @ r)
     it = 0
@@ -264,7 +275,7 @@ def refine_map(problem: ViProblem, start: MapState, pri: BiasPriors, noise: Nois
     (module docstring), until every factor is within 10 % of 1."""
     nm = replace(noise, rotation_var=max(noise.rotation_var, MIN_ROTATION_VAR),
                  position_var=max(noise.position_var, MIN_POSITION_VAR / start.scale**2),
-                 imu_factor=max(noise.imu_factor, 1.0))
+                 gyro_factor=max(noise.gyro_factor, 1.0), accel_factor=max(noise.accel_factor, 1.0))
     st, total = start, 0
     settled = False
     for rnd in range(rounds + 1):
@@ -273,11 +284,11 @@ def refine_map(problem: ViProblem, start: MapState, pri: BiasPriors, noise: Nois
         if settled or rnd == rounds:
             break
         red = _redundancies(J, groups)
-        f = [float(r[g] @ r[g]) / max(u, 1e-9) for g, u in zip(groups[:3], red[:3], strict=True)]
+        f = [float(r[g] @ r[g]) / max(u, 1e-9) for g, u in zip(groups[:4], red[:4], strict=True)]
         settled = all(abs(math.log(max(x, 1e-12))) < 0.1 for x in f)
-        nm = NoiseModel(max(MIN_ROTATION_VAR, nm.rotation_var * f[0]),
-                        max(MIN_POSITION_VAR / st.scale**2, nm.position_var * f[1]),
-                        max(1.0, nm.imu_factor * f[2]))
+        f[1] = 1.0  # the VO position noise is given (vi_init_linear.vo_position_var), not re-estimated
+        nm = NoiseModel(max(MIN_ROTATION_VAR, nm.rotation_var * f[0]), nm.position_var,
+                        max(1.0, nm.gyro_factor * f[2]), max(1.0, nm.accel_factor * f[3]))
     dof = max(r.shape[0] - J.shape[1], 1)
     chi2 = float(r @ r) / dof
     cov = covariance(J) * max(1.0, chi2)

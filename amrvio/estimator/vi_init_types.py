@@ -118,7 +118,7 @@ class ViInitFigures:
     linear_scale: float = float("nan")
     vo_position_sigma_m: float = float("nan")
     vo_rotation_sigma_deg: float = float("nan")
-    imu_noise_factor: float = float("nan")
+    accel_noise_factor: float = float("nan")
     chi2_per_dof: float = float("nan")
     iterations: int = 0
 
