@@ -51,7 +51,8 @@ from amrvio.estimator.vi_init_map import (
     MapResult,
     MapState,
     NoiseModel,
-    index_bias,
+    index_accel_bias,
+    index_gyro_bias,
     refine_map,
 )
 from amrvio.estimator.vi_init_types import (
@@ -116,14 +117,15 @@ def _imu_gap(imu: ImuData, t0: int, t1: int) -> str:
     return ""
 
 
-def _priors(cfg: ViInitConfig, prior: ViBiasPrior | None) -> BiasPriors:
+def _priors(cfg: ViInitConfig, prior: ViBiasPrior | None, noise: ImuNoise) -> BiasPriors:
+    walk = max(noise.accel_random_walk, 1e-6)
     if prior is None:
         z = np.zeros(3)
-        return BiasPriors(z, np.full(3, cfg.gyro_bias_sigma_rad_s), z, np.full(3, cfg.accel_bias_sigma_m_s2))
+        return BiasPriors(z, np.full(3, cfg.gyro_bias_sigma_rad_s), z, np.full(3, cfg.accel_bias_sigma_m_s2), walk)
     return BiasPriors(np.asarray(prior.gyro_bias_rad_s, dtype=np.float64),
                       np.maximum(np.asarray(prior.gyro_bias_std_rad_s, dtype=np.float64), 1e-6),
                       np.asarray(prior.accel_bias_m_s2, dtype=np.float64),
-                      np.maximum(np.asarray(prior.accel_bias_std_m_s2, dtype=np.float64), 1e-6))
+                      np.maximum(np.asarray(prior.accel_bias_std_m_s2, dtype=np.float64), 1e-6), walk)
 
 
 def _done(status: ViInitStatus, cfg: ViInitConfig, ex: ViExcitation | None, fig: ViInitFigures | None,
@@ -157,7 +159,7 @@ def initialize_vi(
     gap = _imu_gap(imu, int(st[0]), int(st[-1]))
     if gap:
         return _done(S.IMU_MISSING, cfg, None, None, detail=gap)
-    pri = _priors(cfg, prior)
+    pri = _priors(cfg, prior, noise)
     R_vo_body = np.einsum("nij,jk->nik", T[:, :3, :3], T_body_cam.inverse().R)
     pre = preintegrate_between(imu, st, pri.gyro_mean, pri.accel_mean, None)
     problem = ViProblem(R_vo_body, T[:, :3, 3].copy(), np.asarray(T_body_cam.t, dtype=np.float64), pre)
@@ -217,7 +219,8 @@ def _solve(problem: ViProblem, cfg: ViInitConfig, pri: BiasPriors, bg: F64, rot_
                         position_var=max(MIN_POSITION_VAR / with_ba.scale**2, vo_position_var(
                             problem, bg, with_ba.accel_bias, with_ba.scale, with_ba.gravity_vo)))
     start = MapState(with_ba.scale, with_ba.gravity_vo, problem.R_vo_body,
-                     with_ba.scale * problem.c_vo + problem.lever_vo, with_ba.velocities_vo, bg, with_ba.accel_bias)
+                     with_ba.scale * problem.c_vo + problem.lever_vo, with_ba.velocities_vo, bg,
+                     np.tile(with_ba.accel_bias, (problem.n_keyframes, 1)))
     mp = refine_map(problem, start, pri, noise0)
     state = _state(mp, stamps_ns)
     fig = dataclasses.replace(fig, vo_position_sigma_m=math.sqrt(mp.noise.position_var) * mp.state.scale,
@@ -241,7 +244,8 @@ def _solve(problem: ViProblem, cfg: ViInitConfig, pri: BiasPriors, bg: F64, rot_
 
 def _state(mp: MapResult, stamps_ns: I64) -> ViInitState:
     s, cov = mp.state, mp.covariance
-    ib = index_bias(s.velocities_vo.shape[0])
+    K = s.velocities_vo.shape[0]
+    ig, ia = index_gyro_bias(K), index_accel_bias(K - 1)
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
     g_dir = s.gravity_vo / np.linalg.norm(s.gravity_vo)
     return ViInitState(
@@ -250,9 +254,9 @@ def _state(mp: MapResult, stamps_ns: I64) -> ViInitState:
         gravity_vo=_ro(s.gravity_vo),
         gravity_std_deg=math.degrees(math.sqrt(max(float(cov[1, 1] + cov[2, 2]), 0.0))),
         gyro_bias_rad_s=_ro(s.gyro_bias),
-        gyro_bias_std_rad_s=_ro(sd[ib:ib + 3]),
-        accel_bias_m_s2=_ro(s.accel_bias),
-        accel_bias_std_m_s2=_ro(sd[ib + 3:ib + 6]),
+        gyro_bias_std_rad_s=_ro(sd[ig:ig + 3]),
+        accel_bias_m_s2=_ro(s.accel_bias[-1]),
+        accel_bias_std_m_s2=_ro(sd[ia:ia + 3]),
         velocities_vo=_ro(s.velocities_vo),
         R_world_vo=_ro(gravity_aligned_rotation(-g_dir)),
         stamps_ns=np.array(stamps_ns, copy=True),

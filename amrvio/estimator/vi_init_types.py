@@ -127,7 +127,8 @@ class ViInitFigures:
 class ViInitState:
     """The estimated state. scale: metric = scale x VO units, with scale_std from the marginal
     covariance of the MAP step; gravity_vo (3,) m/s^2 in the VO frame and gravity_std_deg;
-    gyro/accel biases (3,) with std (3,); velocities_vo (K, 3) m/s of the body at the keyframes;
+    gyro and accelerometer biases (3,) with std (3,), the accelerometer's at the last keyframe
+    (it is a random walk over the window); velocities_vo (K, 3) m/s of the body at the keyframes;
     R_world_vo (3, 3): a gravity-aligned world (z up, yaw free, set to 0) from the VO frame;
     stamps_ns (K,)."""
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from amrvio.estimator.vi_init_linear import ViProblem
-from amrvio.estimator.vi_init_map import BiasPriors, MapState, NoiseModel, _linearise, _step, refine_map
+from amrvio.estimator.vi_init_map import BLOCK, BiasPriors, MapState, NoiseModel, _linearise, _step, refine_map
 from amrvio.imu.preintegration import preintegrate_between
 from amrvio.sim.imu_synth import synthesize_imu
 from amrvio.sim.motion import MotionLayout, default_T_body_cam, make_motion
@@ -31,7 +31,8 @@ def _problem(seed: int = 0) -> tuple[ViProblem, MapState]:
     c = (st.p_world + np.einsum("nij,j->ni", st.R_world_body, T_bc.t)) / SCALE
     pre = preintegrate_between(syn.imu, stamps, np.zeros(3), np.zeros(3), NOISE)
     problem = ViProblem(st.R_world_body, c, np.asarray(T_bc.t), pre)
-    truth = MapState(SCALE, np.array([0.0, 0.0, -9.81]), st.R_world_body, st.p_world, st.v_world, bg, ba)
+    truth = MapState(SCALE, np.array([0.0, 0.0, -9.81]), st.R_world_body, st.p_world, st.v_world, bg,
+                     np.tile(ba, (10, 1)))
     assert R_wc.shape == (10, 3, 3)
     return problem, truth
 
@@ -49,12 +50,12 @@ def test_jacobians_match_finite_differences() -> None:
     st = MapState(truth.scale * 1.05, so3_exp(np.array([0.02, -0.01, 0.0])) @ truth.gravity_vo,
                   np.einsum("nij,njk->nik", truth.R_vo_body, so3_exp(0.01 * rng.standard_normal((K, 3)))),
                   truth.p_vo + 0.01 * rng.standard_normal((K, 3)), truth.velocities_vo + 0.02 * rng.standard_normal((K, 3)),
-                  truth.gyro_bias + 0.003, truth.accel_bias - 0.02)
+                  truth.gyro_bias + 0.003, truth.accel_bias - 0.02 + 0.01 * rng.standard_normal((K, 3)))
     _, _, J_pos, _, J_imu = _linearise(problem, st)
     n = J_pos.shape[2]
     J_rot = np.zeros((3 * K, n))
     for k in range(K):
-        J_rot[3 * k:3 * k + 3, 3 + 9 * k:6 + 9 * k] = np.eye(3)
+        J_rot[3 * k:3 * k + 3, 3 + BLOCK * k:6 + BLOCK * k] = np.eye(3)
     J = np.vstack([J_rot, J_pos.reshape(-1, n), J_imu.reshape(-1, n)])
     r0 = _stacked(problem, st)
     eps = 1e-6
@@ -73,12 +74,12 @@ def test_gauss_newton_returns_to_the_truth_on_exact_data() -> None:
     problem, truth = _problem(seed=2)
     K = problem.n_keyframes
     start = MapState(truth.scale * 0.9, so3_exp(np.array([0.03, 0.02, 0.0])) @ truth.gravity_vo,
-                     problem.R_vo_body, truth.p_vo * 0.9, truth.velocities_vo * 0.9, np.zeros(3), np.zeros(3))
-    pri = BiasPriors(np.zeros(3), np.full(3, 0.1), np.zeros(3), np.full(3, 0.5))
+                     problem.R_vo_body, truth.p_vo * 0.9, truth.velocities_vo * 0.9, np.zeros(3), np.zeros((K, 3)))
+    pri = BiasPriors(np.zeros(3), np.full(3, 0.1), np.zeros(3), np.full(3, 0.5), NOISE.accel_random_walk)
     res = refine_map(problem, start, pri, NoiseModel(1e-10, 1e-10))
     assert abs(res.state.scale / SCALE - 1.0) < 1e-3
     np.testing.assert_allclose(res.state.gravity_vo, truth.gravity_vo, atol=5e-3)
     np.testing.assert_allclose(res.state.velocities_vo, truth.velocities_vo, atol=5e-3)
     np.testing.assert_allclose(res.state.gyro_bias, truth.gyro_bias, atol=1e-4)
     np.testing.assert_allclose(res.state.accel_bias, truth.accel_bias, atol=1e-2)  # measured 4e-3
-    assert res.covariance.shape == (3 + 9 * K + 6,) * 2
+    assert res.covariance.shape == (3 + BLOCK * K + 3,) * 2
