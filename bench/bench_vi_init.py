@@ -1,17 +1,24 @@
 """The visual-inertial initialiser along the whole real EuRoC V1_01 flight (issue 10, "Done when").
 
-Each window (``window_s`` long, starting every ``step_s``) feeds :func:`initialize_vi` the
-ground-truth camera poses at ``kf_hz`` (every other 20 Hz ground-truth pose at 10 Hz), with seeded
-noise (``pos_sigma_m`` per axis on positions, ``rot_sigma_deg`` per axis on rotations), expressed
-in the first keyframe's camera frame and divided by ``SCALE``, and the real recorded IMU. Truth:
-scale ``SCALE``; gravity: the vector the ground truth implies (bench/euroc_v101.py), in that frame.
+Each window (``WINDOW_S`` long, starting every second) feeds :func:`initialize_vi` the
+ground-truth camera poses at 10 Hz (every other 20 Hz ground-truth pose), with seeded noise
+(``POS_SIGMA_M`` per axis on positions, ``ROT_SIGMA_DEG`` per axis on rotations), expressed in the
+first keyframe's camera frame and divided by ``SCALE``, and the real recorded IMU. Truth: scale
+``SCALE``; gravity: the vector the ground truth implies (bench/euroc_v101.py), in that frame.
+
+Why 8 s: the recorded IMU is far noisier than its datasheet on the flying MAV (the MAP step finds
+the accelerometer's white noise 5 to 8 times the datasheet's, and its bias wandering), so a 3 s
+window gives a scale standard deviation of 1.5 to 3 % whatever the VO noise, and 8 s windows get
+0.7 to 1 %. ``--window 3`` shows it.
 
 The table has one row per window: start, excitation (acceleration spread per camera axis, rotation
-range), status, condition number, scale error, gravity error, scale std. The summary rows: the
-worst scale and gravity errors of the windows called OK, and the median scale error of the windows
-called degenerate (every window is solved, ``solve_degenerate``, so that they have one).
+range), status, condition number, scale error and std, gravity error and std. Every window is
+solved (``solve_degenerate``) so that the windows not called OK have a scale to compare. The
+summary: the worst errors of the windows called OK, the median scale error of the others, the mean
+error, and how often the error lies within 3 reported standard deviations.
 
-Run alone: ``.venv/bin/python -m bench.bench_vi_init [--quick]`` (prints the table).
+Run alone: ``.venv/bin/python -m bench.bench_vi_init [--quick] [--window S] [--pos-sigma M]
+[--rot-sigma DEG]`` (prints the table and the summary).
 """
 
 from __future__ import annotations
@@ -31,8 +38,9 @@ F64 = NDArray[np.float64]
 Row = dict[str, object]
 
 SCALE = 3.7
-POS_SIGMA_M = 0.002
-ROT_SIGMA_DEG = 0.1
+WINDOW_S = 8.0
+POS_SIGMA_M = 0.0003
+ROT_SIGMA_DEG = 0.02
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,7 +62,7 @@ class WindowOutcome:
     gravity_err_deg: float
 
 
-def make_case(flight: EurocFlight, start_s: float, window_s: float = 3.0, kf_hz: float = 10.0,
+def make_case(flight: EurocFlight, start_s: float, window_s: float = WINDOW_S, kf_hz: float = 10.0,
               pos_sigma_m: float = POS_SIGMA_M, rot_sigma_deg: float = ROT_SIGMA_DEG,
               seed: int = 0) -> WindowCase:
     """The keyframes of the window at ``start_s`` (noise seeded by ``seed`` and the start)."""
@@ -93,7 +101,7 @@ def window_starts(flight: EurocFlight, window_s: float, step_s: float) -> list[f
     return [float(s) for s in np.arange(0.0, span - window_s + 1e-9, step_s)]
 
 
-def sweep(flight: EurocFlight, starts: list[float], window_s: float = 3.0, seed: int = 0,
+def sweep(flight: EurocFlight, starts: list[float], window_s: float = WINDOW_S, seed: int = 0,
           pos_sigma_m: float = POS_SIGMA_M, rot_sigma_deg: float = ROT_SIGMA_DEG,
           config: ViInitConfig | None = None) -> list[WindowOutcome]:
     return [run_case(flight, make_case(flight, s, window_s, 10.0, pos_sigma_m, rot_sigma_deg, seed), config)
@@ -118,16 +126,22 @@ def table(outcomes: list[WindowOutcome]) -> list[str]:
 
 
 def summary(outcomes: list[WindowOutcome]) -> dict[str, float]:
+    """Counts and error figures: of the windows called OK, of the others (solved anyway), and how
+    often the error lies within 3 reported standard deviations."""
     ok = [o for o in outcomes if o.result.status is ViInitStatus.OK]
     bad = [o for o in outcomes if o.result.status is not ViInitStatus.OK and math.isfinite(o.scale_err)]
+    solved = [o for o in outcomes if o.result.state is not None and o.result.state.scale > 0]
     nan = float("nan")
+    z = [abs(o.scale_err) * SCALE / o.result.state.scale_std for o in solved if o.result.state is not None]
     return {
         "windows": float(len(outcomes)),
         "ok": float(len(ok)),
         "ok_max_scale_err": max((abs(o.scale_err) for o in ok), default=nan),
         "ok_max_gravity_err_deg": max((o.gravity_err_deg for o in ok), default=nan),
-        "degenerate_median_scale_err": float(np.median([abs(o.scale_err) for o in bad])) if bad else nan,
-        "degenerate_share_over_2pct": (float(np.mean([abs(o.scale_err) > 0.02 for o in bad])) if bad else nan),
+        "not_ok_median_scale_err": float(np.median([abs(o.scale_err) for o in bad])) if bad else nan,
+        "not_ok_share_over_2pct": float(np.mean([abs(o.scale_err) > 0.02 for o in bad])) if bad else nan,
+        "mean_scale_err": float(np.mean([o.scale_err for o in solved])) if solved else nan,
+        "share_within_3_std": float(np.mean([v < 3.0 for v in z])) if z else nan,
     }
 
 
@@ -135,10 +149,11 @@ def run(quick: bool) -> list[Row]:
     if not V101.is_dir():
         return []
     flight = load_flight()
-    starts = window_starts(flight, 3.0, 5.0 if quick else 1.0)
+    starts = window_starts(flight, WINDOW_S, 5.0 if quick else 1.0)
     outs = sweep(flight, starts)
     s = summary(outs)
-    note = f"3 s windows, 10 Hz keyframes, pose noise {POS_SIGMA_M * 1e3:g} mm / {ROT_SIGMA_DEG:g} deg, scale {SCALE}"
+    note = (f"{WINDOW_S:g} s windows, 10 Hz keyframes, pose noise {POS_SIGMA_M * 1e3:g} mm / {ROT_SIGMA_DEG:g} deg, "
+            f"scale {SCALE}")
     return [
         {"name": "vi_init windows", "value": s["windows"], "unit": "", "note": note},
         {"name": "vi_init windows OK", "value": s["ok"], "unit": "", "note": "status OK"},
@@ -146,8 +161,10 @@ def run(quick: bool) -> list[Row]:
          "note": "goal <= 2"},
         {"name": "vi_init OK: worst gravity error", "value": s["ok_max_gravity_err_deg"], "unit": "deg",
          "note": "goal <= 1"},
-        {"name": "vi_init not OK: median scale error", "value": 100 * s["degenerate_median_scale_err"], "unit": "%",
+        {"name": "vi_init not OK: median scale error", "value": 100 * s["not_ok_median_scale_err"], "unit": "%",
          "note": "solved anyway"},
+        {"name": "vi_init: scale error within 3 reported std", "value": 100 * s["share_within_3_std"], "unit": "%",
+         "note": "windows solved"},
     ]
 
 
@@ -156,7 +173,7 @@ def main(argv: list[str]) -> int:
 
     ap = argparse.ArgumentParser(description="VI initialiser along the real EuRoC V1_01 flight")
     ap.add_argument("--quick", action="store_true", help="windows every 5 s instead of 1 s")
-    ap.add_argument("--window", type=float, default=3.0, help="window length, s")
+    ap.add_argument("--window", type=float, default=WINDOW_S, help="window length, s")
     ap.add_argument("--pos-sigma", type=float, default=POS_SIGMA_M, help="keyframe position noise, m")
     ap.add_argument("--rot-sigma", type=float, default=ROT_SIGMA_DEG, help="keyframe rotation noise, deg")
     ap.add_argument("--seed", type=int, default=0)

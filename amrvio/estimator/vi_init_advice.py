@@ -83,16 +83,17 @@ def measure_excitation(
     )
 
 
-def _move_advice(ex: ViExcitation, cfg: ViInitConfig) -> str:
-    """Accelerate and stop over the distance that gives the missing acceleration spread (a move of
-    distance d that accelerates then brakes over a window T has an acceleration RMS of about
-    4 d / T^2), then turn when the window did not."""
-    T = max(ex.duration_s, cfg.min_duration_s)
-    d = max(0.5, math.ceil(2.0 * cfg.gates.min_accel_std_m_s2 * T * T / 4.0) / 2.0)
+def _move_advice(ex: ViExcitation, cfg: ViInitConfig, needed_m_s2: float) -> str:
+    """Accelerate and stop over the distance that gives ``needed_m_s2`` of acceleration spread (a
+    move of distance d that accelerates then brakes over tau seconds has an acceleration RMS of
+    about 4 d / tau^2), within at most 3 s, then turn when the window did not."""
+    tau = min(max(ex.duration_s, cfg.min_duration_s), 3.0)
+    d = max(0.5, math.ceil(2.0 * needed_m_s2 * tau * tau / 4.0) / 2.0)
+    again = ", and repeat" if ex.duration_s > tau + 0.5 else ""
     turn = ", then turn about 90 degrees" if ex.rotation_range_deg < cfg.gates.min_rotation_deg else ""
     axes = ", ".join(f"{CAMERA_AXES[i].split(' ')[0]} {ex.accel_std_cam_m_s2[i]:.2f}" for i in range(3))
-    return (f"accelerate forward about {d:g} m and stop within {T:.0f} s{turn} (acceleration spread "
-            f"{ex.accel_std_m_s2:.2f} m/s^2 here, {cfg.gates.min_accel_std_m_s2:.2f} needed; {axes}; "
+    return (f"accelerate forward about {d:g} m and stop within {tau:.0f} s{again}{turn} (acceleration spread "
+            f"{ex.accel_std_m_s2:.2f} m/s^2 here, about {needed_m_s2:.2f} needed; {axes}; "
             f"rotation {ex.rotation_range_deg:.0f} deg)")
 
 
@@ -117,13 +118,17 @@ def advice(status: ViInitStatus, cfg: ViInitConfig, ex: ViExcitation | None,
                 f"{g.max_gravity_std_deg:g} allowed; scale is fine): turn about 90 degrees (the window "
                 f"turned {ex.rotation_range_deg:.0f} deg) so that the accelerometer bias separates from gravity")
     if status in (S.INSUFFICIENT_EXCITATION, S.SCALE_UNCERTAIN, S.ILL_CONDITIONED) and ex is not None:
+        needed = g.min_accel_std_m_s2
+        if status is S.SCALE_UNCERTAIN and math.isfinite(_rel_std(state)):
+            # the scale's standard deviation falls about as 1 / acceleration spread
+            needed = max(needed, ex.accel_std_m_s2 * _rel_std(state) / g.max_scale_rel_std)
         why = {S.INSUFFICIENT_EXCITATION: "scale is not observable: too little acceleration change "
                                           "(constant velocity or rest)",
                S.SCALE_UNCERTAIN: f"scale uncertain ({fmt_num(100 * _rel_std(state), 1)} % std, "
                                   f"{100 * g.max_scale_rel_std:g} % allowed)",
                S.ILL_CONDITIONED: f"the accelerations do not pin scale and gravity apart (condition "
                                   f"number {fmt_num(fig.condition_number if fig else math.nan, 0)})"}[status]
-        return f"{why}; {_move_advice(ex, cfg)}"
+        return f"{why}; {_move_advice(ex, cfg, needed)}"
     if status is S.NEGATIVE_SCALE:
         return ("the VO translation runs against what the accelerometer measured (negative scale): "
                 + CHECK_SETUP)

@@ -40,8 +40,8 @@ class ViInitGates:
     ``max_condition_number`` of the column-equilibrated, whitened linear system;
     ``max_gravity_norm_error``: relative error of the free gravity vector's norm;
     ``max_rotation_rms_deg``: VO against gyro rotation per keyframe interval, after the bias;
-    ``max_scale_rel_std``: scale standard deviation / scale; ``max_gravity_std_deg``: standard
-    deviation of the gravity direction."""
+    ``max_scale_rel_std``: scale standard deviation / scale (0.8 %: a 2 % error is 2.5 standard
+    deviations); ``max_gravity_std_deg``: standard deviation of the gravity direction (1 deg is 3)."""
 
     min_accel_std_m_s2: float = 0.25
     min_rotation_deg: float = 20.0
@@ -50,8 +50,8 @@ class ViInitGates:
     max_rotation_rms_deg: float = 1.0
     max_gyro_bias_rad_s: float = 0.2
     max_accel_bias_m_s2: float = 0.6
-    max_scale_rel_std: float = 0.005
-    max_gravity_std_deg: float = 0.25
+    max_scale_rel_std: float = 0.008
+    max_gravity_std_deg: float = 0.33
 
 
 @dataclass(frozen=True, slots=True)
