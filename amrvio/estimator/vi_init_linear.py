@@ -120,11 +120,11 @@ def tangent_basis(g_dir: F64) -> F64:
     return np.stack([b1, np.cross(g_dir, b1)], axis=1)
 
 
-def _solve(blocks: list[F64], W: F64, extra_rows: F64 | None = None,
+def _solve(A_raw: F64, b_raw: F64, W: F64, extra_rows: F64 | None = None,
            extra_rhs: F64 | None = None) -> tuple[F64, float, F64]:
-    """Assemble the whitened system from per-interval blocks [A (M, 6, n_k)..., rhs (M, 6)] laid out
-    by the caller, solve it; returns (x, condition number, unwhitened residual (M, 6))."""
-    A_raw, b_raw = blocks[0], blocks[1]
+    """Whiten the per-interval system A_raw (M, 6, n) x = b_raw (M, 6) with W (M, 6, 6), append the
+    (already whitened) ``extra_rows``, and solve it by the column-equilibrated normal equations;
+    returns (x, condition number of the equilibrated system, unwhitened residual (M, 6))."""
     M = A_raw.shape[0]
     A = np.einsum("mij,mjn->min", W, A_raw).reshape(M * 6, -1)
     b = np.einsum("mij,mj->mi", W, b_raw).reshape(M * 6)
@@ -165,7 +165,7 @@ def solve_free_gravity(problem: ViProblem, gyro_bias: F64, W: F64) -> LinearSolu
     preintegration's (Qin et al. 2018, eq. 11)."""
     ba = np.asarray(problem.pre[0].accel_bias_m_s2)
     a_s, a_g, a_v0, a_v1, rhs = _rows(problem, gyro_bias, ba)
-    x, cond, resid = _solve([_layout(a_s, a_g, a_v0, a_v1, None), rhs], W)
+    x, cond, resid = _solve(_layout(a_s, a_g, a_v0, a_v1, None), rhs, W)
     K = problem.n_keyframes
     return LinearSolution(float(x[0]), x[1:4], x[4:4 + 3 * K].reshape(K, 3), ba, cond,
                           float(np.sqrt(np.mean(resid[:, 3:6] ** 2))))
@@ -218,7 +218,7 @@ def solve_inverse_scale(
             rows[:, n - 3:] = np.diag(1.0 / (lam0 * accel_prior[1]))
             rows[:, 0] = -(accel_prior[0] - ba0) / (lam0 * accel_prior[1])
             prhs = np.zeros(3)
-        x, cond, resid = _solve([layout, -a_s], Wv, rows, prhs)
+        x, cond, resid = _solve(layout, -a_s, Wv, rows, prhs)
         lam = float(x[0])
         if lam == 0.0:
             return LinearSolution(float("inf"), gravity_vo, np.zeros((K, 3)), ba0, cond, float("nan"))
