@@ -80,3 +80,30 @@ def load_flight(root: Path = V101) -> EurocFlight:
     return EurocFlight(imu, gt, R, np.asarray(gt.trajectory.positions_m),
                        read_euroc_sensor_T_BS(mav / "cam0" / "sensor.yaml"),
                        read_euroc_imu(mav / "imu0" / "sensor.yaml"), g)
+
+
+def synthetic_flight(flight: EurocFlight, seed: int = 0) -> EurocFlight:
+    """The same flight with the recorded IMU replaced by a synthetic one: the exact angular rate and
+    specific force of the ground truth (amrvio.sim.replay spline, which passes through every
+    ground-truth pose), plus the ground truth's own time-varying biases and the datasheet's white
+    noise (seeded). Gravity is then exactly (0, 0, -9.81). A control: the recorded IMU against its
+    model, everything else equal."""
+    from amrvio.sim.imu_synth import GRAVITY_WORLD, ideal_imu
+    from amrvio.sim.replay import make_replay_motion
+
+    gt = flight.gt
+    ns = gt.stamps_ns
+    motion = make_replay_motion(ns, gt.trajectory.positions_m, gt.trajectory.quats_wxyz, 0.0, None, 0.0,
+                                gt.gyro_bias, gt.accel_bias, margin_s=0.0)
+    sel = (flight.imu.stamps_ns >= ns[0]) & (flight.imu.stamps_ns <= ns[-1])
+    stamps = flight.imu.stamps_ns[sel]
+    t = (stamps - motion.t0_ns).astype(np.float64) * 1e-9
+    gyro, accel = ideal_imu(motion.states(t))
+    bg, ba = motion.gyro_bias_at(t), motion.accel_bias_at(t)
+    rng = np.random.default_rng(seed)
+    sg, sa = flight.noise.discrete_sigmas()
+    gyro = gyro + (0.0 if bg is None else bg) + sg * rng.standard_normal(gyro.shape)
+    accel = accel + (0.0 if ba is None else ba) + sa * rng.standard_normal(accel.shape)
+    from dataclasses import replace
+
+    return replace(flight, imu=ImuData(stamps, gyro, accel), gravity_world=np.array(GRAVITY_WORLD, dtype=np.float64))

@@ -65,7 +65,7 @@ from amrvio.estimator.vi_init_types import (
     ViInitStatus,
 )
 from amrvio.imu.preintegration import preintegrate_between
-from amrvio.imu.static_init import gravity_aligned_rotation
+from amrvio.imu.static_init import StaticInitResult, gravity_aligned_rotation
 from amrvio.types.lie import SE3
 from amrvio.types.sensors import ImuData, ImuNoise
 
@@ -73,7 +73,7 @@ F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
 __all__ = ["ViBiasPrior", "ViExcitation", "ViInitConfig", "ViInitFigures", "ViInitResult", "ViInitState",
-           "ViInitStatus", "initialize_vi"]
+           "ViInitStatus", "bias_prior_from_static", "initialize_vi"]
 
 LINEAR_POSITION_SIGMA_M = 0.01
 """Keyframe position noise assumed by the first linear solve; later steps estimate it."""
@@ -126,6 +126,21 @@ def _priors(cfg: ViInitConfig, prior: ViBiasPrior | None, noise: ImuNoise) -> Bi
                       np.maximum(np.asarray(prior.gyro_bias_std_rad_s, dtype=np.float64), 1e-6),
                       np.asarray(prior.accel_bias_m_s2, dtype=np.float64),
                       np.maximum(np.asarray(prior.accel_bias_std_m_s2, dtype=np.float64), 1e-6), walk)
+
+
+def bias_prior_from_static(static: StaticInitResult, config: ViInitConfig | None = None) -> ViBiasPrior | None:
+    """The bias prior a static initialisation gives (None unless it is OK): its gyro bias and std;
+    for the accelerometer, the bias along gravity it measured (across gravity it sees none), with
+    the config's per-axis sigma (the prior is per axis, so the measured axis is not tightened)."""
+    cfg = ViInitConfig() if config is None else config
+    if not static.ok or static.gyro_bias_rad_s is None or static.gyro_bias_std_rad_s is None:
+        return None
+    if static.gravity_body is None:
+        return None
+    up = -np.asarray(static.gravity_body, dtype=np.float64)
+    return ViBiasPrior(np.asarray(static.gyro_bias_rad_s, dtype=np.float64),
+                       np.asarray(static.gyro_bias_std_rad_s, dtype=np.float64),
+                       up * static.accel_bias_up_m_s2, np.full(3, cfg.accel_bias_sigma_m_s2))
 
 
 def _done(status: ViInitStatus, cfg: ViInitConfig, ex: ViExcitation | None, fig: ViInitFigures | None,

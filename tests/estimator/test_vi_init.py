@@ -16,8 +16,10 @@ from amrvio.estimator.vi_init import (
     ViInitConfig,
     ViInitResult,
     ViInitStatus,
+    bias_prior_from_static,
     initialize_vi,
 )
+from amrvio.imu.static_init import StaticInitStatus, static_init
 from amrvio.sim.motion import make_motion
 from amrvio.sim.scene import make_scene
 from amrvio.sim.simulate import layout_for_scene
@@ -232,3 +234,24 @@ def test_malformed_arrays_raise(exact_handheld: ViCase) -> None:
         initialize_vi(c.stamps_ns, skew, c.imu, c.T_body_cam, NOISE)
     with pytest.raises(ShapeError, match="integer"):
         initialize_vi(c.stamps_ns * 1.0, c.T_vo_cam, c.imu, c.T_body_cam, NOISE)
+
+
+def test_static_initialisation_gives_the_bias_prior(exact_handheld: ViCase) -> None:
+    c = exact_handheld
+    n = 401  # 2 s at rest, level, before the motion
+    rng = np.random.default_rng(3)
+    sg, sa = NOISE.discrete_sigmas()
+    t = c.stamps_ns[0] - 2_000_000_000 + np.arange(n, dtype=np.int64) * 5_000_000
+    rest = ImuData(t, GYRO_BIAS + sg * rng.standard_normal((n, 3)),
+                   np.array([0.0, 0.0, 9.81]) + ACCEL_BIAS + sa * rng.standard_normal((n, 3)))
+    res = static_init(rest, noise=NOISE)
+    assert res.status is StaticInitStatus.OK
+    prior = bias_prior_from_static(res)
+    assert prior is not None
+    assert np.all(np.abs(prior.gyro_bias_rad_s - GYRO_BIAS) < 4 * prior.gyro_bias_std_rad_s)
+    np.testing.assert_allclose(prior.accel_bias_m_s2, [0.0, 0.0, ACCEL_BIAS[2]], atol=3e-3)  # along gravity only
+    with_prior = _run(c, prior=prior)
+    assert with_prior.status is ViInitStatus.OK and with_prior.state is not None
+    np.testing.assert_allclose(with_prior.state.gyro_bias_rad_s, GYRO_BIAS, atol=1e-4)
+    moving = static_init(c.imu.window(int(c.stamps_ns[0]), int(c.stamps_ns[-1])))
+    assert bias_prior_from_static(moving) is None
