@@ -115,15 +115,16 @@ def sweep(flight: EurocFlight, starts: list[float], window_s: float = WINDOW_S, 
 
 def table(outcomes: list[WindowOutcome]) -> list[str]:
     """Markdown table, one row per window."""
-    lines = ["| start s | acc x | acc y | acc z | rot deg | status | cond | scale err % | scale std % "
+    lines = ["| start s | acc x | acc y | acc z | rot deg | travel/jitter | status | cond | scale err % | scale std % "
              "| grav err deg | grav std deg |",
-             "|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
+             "|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
     for o in outcomes:
         ex, fig, st = o.result.excitation, o.result.figures, o.result.state
         acc = ex.accel_std_cam_m_s2 if ex is not None else np.full(3, np.nan)
         lines.append(
             f"| {o.case.start_s:.0f} | {acc[0]:.2f} | {acc[1]:.2f} | {acc[2]:.2f} | "
-            f"{ex.rotation_range_deg if ex else float('nan'):.0f} | {o.result.status.value} | "
+            f"{ex.rotation_range_deg if ex else float('nan'):.0f} | {ex.translation_snr if ex else float('nan'):.0f} | "
+            f"{o.result.status.value} | "
             f"{fig.condition_number if fig else float('nan'):.0f} | {100 * o.scale_err:+.2f} | "
             f"{100 * st.scale_std / st.scale if st else float('nan'):.2f} | {o.gravity_err_deg:.2f} | "
             f"{st.gravity_std_deg if st else float('nan'):.2f} |")

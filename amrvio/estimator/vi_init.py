@@ -9,7 +9,8 @@ world frame) with their stamps, the IMU samples that cover them and ``T_body_cam
 2. preintegration (amrvio.imu.preintegration) and the gyro bias from the rotations, then a second
    pass at that bias; VO and gyro rotations must agree (ROTATION_MISMATCH) and the bias be
    plausible (IMPLAUSIBLE_BIAS);
-3. the excitation figures, BEFORE solving (INSUFFICIENT_EXCITATION);
+3. the excitation figures, BEFORE solving: enough acceleration change, and a VO camera that
+   translates (INSUFFICIENT_EXCITATION);
 4. scale, gravity and velocities by linear least squares (ILL_CONDITIONED, NEGATIVE_SCALE,
    BAD_GRAVITY_NORM);
 5. gravity refined on its sphere, then the accelerometer bias with its prior
@@ -186,14 +187,14 @@ def initialize_vi(
     rot_err = rotation_errors(problem, bg)
     fig = ViInitFigures(rotation_rms_deg=math.degrees(math.sqrt(float(np.mean(np.sum(rot_err**2, axis=1))))))
     ex = measure_excitation(imu, st, R_vo_body, T_body_cam.R, bg, pri.accel_mean, cfg.lowpass_s,
-                            rotation_range(T[:, :3, :3]))
+                            rotation_range(T[:, :3, :3]), T[:, :3, 3])
     if fig.rotation_rms_deg > cfg.gates.max_rotation_rms_deg:
         return _done(S.ROTATION_MISMATCH, cfg, ex, fig)
     if float(np.max(np.abs(bg))) > cfg.gates.max_gyro_bias_rad_s:
         return _done(S.IMPLAUSIBLE_BIAS, cfg, ex, fig, detail=(
             f"gyro bias {np.array2string(bg, precision=3)} rad/s beyond {cfg.gates.max_gyro_bias_rad_s:g}"))
     status = S.OK
-    if ex.accel_std_m_s2 < cfg.gates.min_accel_std_m_s2:
+    if ex.accel_std_m_s2 < cfg.gates.min_accel_std_m_s2 or ex.translation_snr < cfg.gates.min_translation_snr:
         status = S.INSUFFICIENT_EXCITATION
         if not cfg.solve_degenerate:
             return _done(status, cfg, ex, fig)

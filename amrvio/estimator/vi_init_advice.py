@@ -60,8 +60,10 @@ def measure_excitation(
     accel_bias: F64,
     lowpass_s: float,
     rotation_range: tuple[float, F64],
+    c_vo: F64,
 ) -> ViExcitation:
-    """The :class:`ViExcitation` of a window (module docstring); ``rotation_range`` from the VO."""
+    """The :class:`ViExcitation` of a window (module docstring); ``rotation_range`` from the VO;
+    ``c_vo`` (K, 3) the VO camera positions."""
     win, R = sample_rotations(imu, stamps_ns, R_vo_body, gyro_bias)
     f_vo = np.einsum("nij,nj->ni", R, win.accel_m_s2 - accel_bias)
     dev = f_vo - f_vo.mean(axis=0)
@@ -80,7 +82,22 @@ def measure_excitation(
         accel_std_cam_m_s2=np.asarray(per_axis, dtype=np.float64),
         rotation_range_deg=rotation_range[0],
         rotation_range_cam_deg=np.asarray(rotation_range[1], dtype=np.float64),
+        translation_snr=translation_snr(c_vo),
     )
+
+
+def translation_snr(c_vo: F64) -> float:
+    """Largest distance of the VO camera from its mean position over its jitter, the RMS of its
+    second differences / sqrt(6) (white noise of sigma per keyframe gives sqrt(6) sigma)."""
+    c = np.asarray(c_vo, dtype=np.float64)
+    span = float(np.max(np.linalg.norm(c - c.mean(axis=0), axis=1)))
+    if c.shape[0] < 3:
+        return 0.0
+    d2 = c[2:] - 2.0 * c[1:-1] + c[:-2]
+    jitter = float(np.sqrt(np.mean(np.sum(d2**2, axis=1)) / 6.0))
+    if jitter == 0.0:
+        return math.inf if span > 0.0 else 0.0
+    return span / jitter
 
 
 def _move_advice(ex: ViExcitation, cfg: ViInitConfig, needed_m_s2: float) -> str:
@@ -117,18 +134,22 @@ def advice(status: ViInitStatus, cfg: ViInitConfig, ex: ViExcitation | None,
         return (f"gravity direction uncertain ({fmt_num(state.gravity_std_deg)} deg std, "
                 f"{g.max_gravity_std_deg:g} allowed; scale is fine): turn about 90 degrees (the window "
                 f"turned {ex.rotation_range_deg:.0f} deg) so that the accelerometer bias separates from gravity")
-    if status in (S.INSUFFICIENT_EXCITATION, S.SCALE_UNCERTAIN, S.ILL_CONDITIONED) and ex is not None:
-        needed = g.min_accel_std_m_s2
-        if status is S.SCALE_UNCERTAIN and math.isfinite(_rel_std(state)):
-            # the scale's standard deviation falls about as 1 / acceleration spread
-            needed = max(needed, ex.accel_std_m_s2 * _rel_std(state) / g.max_scale_rel_std)
-        why = {S.INSUFFICIENT_EXCITATION: "scale is not observable: too little acceleration change "
-                                          "(constant velocity or rest)",
-               S.SCALE_UNCERTAIN: f"scale uncertain ({fmt_num(100 * _rel_std(state), 1)} % std, "
-                                  f"{100 * g.max_scale_rel_std:g} % allowed)",
-               S.ILL_CONDITIONED: f"the accelerations do not pin scale and gravity apart (condition "
-                                  f"number {fmt_num(fig.condition_number if fig else math.nan, 0)})"}[status]
-        return f"{why}; {_move_advice(ex, cfg, needed)}"
+    if status is S.SCALE_UNCERTAIN and ex is not None:
+        return (f"scale uncertain ({fmt_num(100 * _rel_std(state), 1)} % std, {100 * g.max_scale_rel_std:g} % "
+                f"allowed): keep accelerating and braking for longer, or harder (acceleration spread "
+                f"{ex.accel_std_m_s2:.2f} m/s^2 over {ex.duration_s:.0f} s here; rotation "
+                f"{ex.rotation_range_deg:.0f} deg)")
+    if status in (S.INSUFFICIENT_EXCITATION, S.ILL_CONDITIONED) and ex is not None:
+        still = ex.translation_snr < g.min_translation_snr
+        if status is S.ILL_CONDITIONED:
+            why = (f"the accelerations do not pin scale and gravity apart (condition number "
+                   f"{fmt_num(fig.condition_number if fig else math.nan, 0)})")
+        elif still:
+            why = (f"scale is not observable: the camera does not translate (travel {ex.translation_snr:.0f} "
+                   "times its jitter)")
+        else:
+            why = "scale is not observable: too little acceleration change (constant velocity or rest)"
+        return f"{why}; {_move_advice(ex, cfg, g.min_accel_std_m_s2)}"
     if status is S.NEGATIVE_SCALE:
         return ("the VO translation runs against what the accelerometer measured (negative scale): "
                 + CHECK_SETUP)

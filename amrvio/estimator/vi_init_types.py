@@ -40,10 +40,13 @@ class ViInitGates:
     ``max_condition_number`` of the column-equilibrated, whitened linear system;
     ``max_gravity_norm_error``: relative error of the free gravity vector's norm;
     ``max_rotation_rms_deg``: VO against gyro rotation per keyframe interval, after the bias;
-    ``max_scale_rel_std``: scale standard deviation / scale (0.8 %: a 2 % error is 2.5 standard
+    ``min_translation_snr``: the VO camera must travel this many times its jitter (checked before
+    solving, with the acceleration: an IMU on a vibrating platform at rest shows acceleration
+    spread without motion); ``max_scale_rel_std``: scale standard deviation / scale (0.8 %: a 2 % error is 2.5 standard
     deviations); ``max_gravity_std_deg``: standard deviation of the gravity direction (1 deg is 3)."""
 
     min_accel_std_m_s2: float = 0.25
+    min_translation_snr: float = 10.0
     min_rotation_deg: float = 20.0
     max_condition_number: float = 1e4
     max_gravity_norm_error: float = 0.1
@@ -90,7 +93,10 @@ class ViExcitation:
 
     accel_std_cam_m_s2 (3,): RMS of the acceleration change along the camera's x (right), y (down)
     and z (forward) axes; rotation_range_deg: largest angle between two keyframe orientations;
-    rotation_range_cam_deg (3,): range of the rotation about the first camera's x, y, z axes.
+    rotation_range_cam_deg (3,): range of the rotation about the first camera's x, y, z axes;
+    translation_snr: how far the VO camera travels (largest distance from its mean position) over
+    its keyframe-to-keyframe jitter (RMS second difference / sqrt(6)): about 3 for a camera at rest
+    or only rotating, hundreds for a camera that moves; scale needs the camera to translate.
     """
 
     duration_s: float
@@ -98,6 +104,7 @@ class ViExcitation:
     accel_std_cam_m_s2: F64
     rotation_range_deg: float
     rotation_range_cam_deg: F64
+    translation_snr: float
 
     @property
     def accel_std_m_s2(self) -> float:
@@ -185,6 +192,7 @@ class ViInitResult:
             "vi_init_accel_std_y_m_s2": float(acc[1]),
             "vi_init_accel_std_z_m_s2": float(acc[2]),
             "vi_init_rotation_range_deg": ex.rotation_range_deg if ex is not None else nan,
+            "vi_init_translation_snr": ex.translation_snr if ex is not None else nan,
             "vi_init_condition_number": fig.condition_number if fig is not None else nan,
             "vi_init_gravity_norm_residual_m_s2": fig.gravity_norm_residual_m_s2 if fig is not None else nan,
             "vi_init_advice": self.advice,

@@ -19,6 +19,7 @@ from amrvio.estimator.vi_init import (
     bias_prior_from_static,
     initialize_vi,
 )
+from amrvio.estimator.vi_init_advice import translation_snr
 from amrvio.imu.static_init import StaticInitStatus, static_init
 from amrvio.sim.motion import make_motion
 from amrvio.sim.scene import make_scene
@@ -255,3 +256,14 @@ def test_static_initialisation_gives_the_bias_prior(exact_handheld: ViCase) -> N
     np.testing.assert_allclose(with_prior.state.gyro_bias_rad_s, GYRO_BIAS, atol=1e-4)
     moving = static_init(c.imu.window(int(c.stamps_ns[0]), int(c.stamps_ns[-1])))
     assert bias_prior_from_static(moving) is None
+
+
+def test_translation_snr_tells_a_still_camera_from_a_moving_one() -> None:
+    rng = np.random.default_rng(0)
+    noise = 0.001 * rng.standard_normal((31, 3))
+    still = translation_snr(noise)
+    assert 1.0 < still < 5.0  # span of white noise over its own sigma
+    t = np.linspace(0.0, 3.0, 31)[:, None]
+    moving = translation_snr(np.hstack([0.5 * t**2, 0.1 * t, 0 * t]) + noise)
+    assert moving > 100.0
+    assert translation_snr(np.zeros((5, 3))) == 0.0
