@@ -1,0 +1,109 @@
+"""The real EuRoC V1_01 flight in ../shared/data (recorded IMU, ground truth with velocities and
+biases), and the gravity its ground truth implies; shared by bench_vi_init and the real-data tests.
+
+Ground-truth gravity. The ground truth's world frame (Vicon) is not exactly level: over the
+whole flight the recorded specific force, rotated into that frame with the ground-truth
+attitude and accelerometer bias, averages to a gravity vector 0.24 deg away from -z
+(:func:`gravity_world_from_flight`; the mean acceleration over 145 s is (v_end - v_0) / T, close
+to zero). That vector is the ground-truth gravity here: on the first (static) seconds it agrees
+with ``-(accel - b_a_gt)`` to 0.01 deg, while -z would be off by 0.24 deg.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amrvio.io.base import read_imu_csv
+from amrvio.io.calib import read_euroc_sensor_T_BS
+from amrvio.io.trajectory import EurocGroundTruth, read_euroc_csv
+from amrvio.types.lie import SE3, quat_wxyz_to_matrix, so3_exp, so3_log
+from amrvio.types.sensors import ImuData, ImuNoise
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+
+V101 = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "euroc_V1_01_easy_first95"
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class EurocFlight:
+    """imu: the whole recorded stream; gt: ground truth (20 Hz, at the camera stamps); R_world_body
+    (N, 3, 3) and p_world_body (N, 3) of gt; T_body_cam; noise: imu0/sensor.yaml; gravity_world
+    (3,): the gravity the ground truth implies (module docstring)."""
+
+    imu: ImuData
+    gt: EurocGroundTruth
+    R_world_body: F64
+    p_world_body: F64
+    T_body_cam: SE3
+    noise: ImuNoise
+    gravity_world: F64
+
+
+def gt_rotations_at(gt_ns: I64, R: F64, t_ns: I64) -> F64:
+    """Ground-truth rotations (M, 3, 3) at ``t_ns`` (inside the ground truth), geodesic interpolation."""
+    idx = np.clip(np.searchsorted(gt_ns, t_ns, side="right") - 1, 0, len(gt_ns) - 2)
+    alpha = (t_ns - gt_ns[idx]).astype(np.float64) / (gt_ns[idx + 1] - gt_ns[idx]).astype(np.float64)
+    d = so3_log(np.einsum("nji,njk->nik", R[idx], R[idx + 1]))
+    return np.asarray(np.einsum("nij,njk->nik", R[idx], so3_exp(d * alpha[:, None])))
+
+
+def gravity_world_from_flight(imu: ImuData, gt: EurocGroundTruth, R_world_body: F64) -> F64:
+    """g_world = mean(a_world) - mean(R_world_body (accel - b_a)) over the ground truth's span,
+    with mean(a_world) = (v_end - v_0) / T (see the module docstring)."""
+    if gt.velocities_m_s is None or gt.accel_bias is None:
+        raise ValueError("the ground truth has no velocities or accelerometer biases")
+    gt_ns = gt.stamps_ns
+    sel = (imu.stamps_ns >= gt_ns[0]) & (imu.stamps_ns <= gt_ns[-1])
+    t = imu.stamps_ns[sel]
+    R = gt_rotations_at(gt_ns, R_world_body, t)
+    idx = np.clip(np.searchsorted(gt_ns, t, side="right") - 1, 0, len(gt_ns) - 1)
+    f_world = np.einsum("nij,nj->ni", R, imu.accel_m_s2[sel] - gt.accel_bias[idx])
+    k0, k1 = int(idx[0]), int(idx[-1])
+    mean_acc = (gt.velocities_m_s[k1] - gt.velocities_m_s[k0]) / ((int(gt_ns[k1]) - int(gt_ns[k0])) * 1e-9)
+    return np.asarray(mean_acc - f_world.mean(axis=0))
+
+
+def load_flight(root: Path = V101) -> EurocFlight:
+    """Read the flight (raises the reader's errors when files are missing or malformed)."""
+    from amrvio.io.calib import read_euroc_imu
+
+    mav = root / "mav0"
+    imu = read_imu_csv(mav / "imu0" / "data.csv")
+    gt = read_euroc_csv(mav / "state_groundtruth_estimate0" / "data.csv")
+    R = quat_wxyz_to_matrix(gt.trajectory.quats_wxyz)
+    g = gravity_world_from_flight(imu, gt, R)
+    return EurocFlight(imu, gt, R, np.asarray(gt.trajectory.positions_m),
+                       read_euroc_sensor_T_BS(mav / "cam0" / "sensor.yaml"),
+                       read_euroc_imu(mav / "imu0" / "sensor.yaml"), g)
+
+
+def synthetic_flight(flight: EurocFlight, seed: int = 0) -> EurocFlight:
+    """The same flight with the recorded IMU replaced by a synthetic one: the exact angular rate and
+    specific force of the ground truth (amrvio.sim.replay spline, which passes through every
+    ground-truth pose), plus the ground truth's own time-varying biases and the datasheet's white
+    noise (seeded). Gravity is then exactly (0, 0, -9.81). A control: the recorded IMU against its
+    model, everything else equal."""
+    from amrvio.sim.imu_synth import GRAVITY_WORLD, ideal_imu
+    from amrvio.sim.replay import make_replay_motion
+
+    gt = flight.gt
+    ns = gt.stamps_ns
+    motion = make_replay_motion(ns, gt.trajectory.positions_m, gt.trajectory.quats_wxyz, 0.0, None, 0.0,
+                                gt.gyro_bias, gt.accel_bias, margin_s=0.0)
+    sel = (flight.imu.stamps_ns >= ns[0]) & (flight.imu.stamps_ns <= ns[-1])
+    stamps = flight.imu.stamps_ns[sel]
+    t = (stamps - motion.t0_ns).astype(np.float64) * 1e-9
+    gyro, accel = ideal_imu(motion.states(t))
+    bg, ba = motion.gyro_bias_at(t), motion.accel_bias_at(t)
+    rng = np.random.default_rng(seed)
+    sg, sa = flight.noise.discrete_sigmas()
+    gyro = gyro + (0.0 if bg is None else bg) + sg * rng.standard_normal(gyro.shape)
+    accel = accel + (0.0 if ba is None else ba) + sa * rng.standard_normal(accel.shape)
+    from dataclasses import replace
+
+    return replace(flight, imu=ImuData(stamps, gyro, accel), gravity_world=np.array(GRAVITY_WORLD, dtype=np.float64))
