@@ -10,6 +10,7 @@ import pytest
 
 from amrvio.imu.static import StandstillStatus, detect_standstill, initial_standstill
 from amrvio.io.base import read_imu_csv
+from tests.skip_policy import skip_shared_missing
 
 pytestmark = pytest.mark.real_data
 
@@ -19,7 +20,7 @@ EUROC = "euroc_V1_01_easy_first95"
 def _mav(shared_data: Path) -> Path:
     mav = shared_data / EUROC / "mav0"
     if not mav.is_dir():
-        pytest.skip(f"{mav} is absent")
+        skip_shared_missing(mav)
     return mav
 
 
