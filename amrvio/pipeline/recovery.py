@@ -20,6 +20,7 @@ from amrvio.estimator.local_mapping import Segment
 from amrvio.estimator.relocalizer import RelocConfig, RelocResult, relocalize
 from amrvio.estimator.segment_link import LinkConfig, link_segments
 from amrvio.estimator.vo_map import VoMap
+from amrvio.types.lie import se3_matrix_inverse
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
@@ -87,8 +88,8 @@ def implausible_jump(T_cam_world: F64, T_last: F64 | None, segment_scale: float,
     worth), else None: a repeated structure (shelves, posters) can look like the place."""
     if T_last is None:
         return None
-    c_new = -T_cam_world[:3, :3].T @ T_cam_world[:3, 3]
-    c_old = -T_last[:3, :3].T @ T_last[:3, 3]
+    c_new = se3_matrix_inverse(T_cam_world)[:3, 3]
+    c_old = se3_matrix_inverse(T_last)[:3, 3]
     dist = float(np.linalg.norm(c_new - c_old)) * segment_scale
     bound = 3.0 * typical_speed * max(frames_since, 5)
     return dist if dist > bound else None
