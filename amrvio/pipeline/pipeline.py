@@ -331,7 +331,8 @@ class Pipeline:
                    rep: TrackingReport | None = None) -> _Step | None:
         """Search ``segment``'s map for ``img``; the relocalised step, or None."""
         self.recovery.lost(segment)
-        reloc = self.recovery.attempt(img, self.mapping.segments[segment].mapper.map)
+        reloc = self.recovery.attempt(img, self.mapping.segments[segment].mapper.map,
+                                      len(self.records))
         if reloc is None:
             return None
         if not reloc.ok or reloc.T_cam_world is None:

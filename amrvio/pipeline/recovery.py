@@ -49,6 +49,7 @@ class MapRecovery:
         self.seed = seed
         self.dbs: dict[int, KeyframeDatabase] = {}
         self.target: int | None = None  # the segment to find again, while lost
+        self.tried = -1  # the last frame searched
         self.timings: dict[str, float] = {}
 
     def add_keyframe(self, segment: int, kf_id: int, image: U8, vomap: VoMap) -> None:
@@ -69,10 +70,13 @@ class MapRecovery:
         """A new map was initialised: stop searching the old one."""
         self.target = None
 
-    def attempt(self, image: U8, vomap: VoMap) -> RelocResult | None:
-        """Try ``image`` in the lost segment's map (None when nothing is being searched)."""
-        if self.target is None or self.target not in self.dbs:
+    def attempt(self, image: U8, vomap: VoMap, frame: int) -> RelocResult | None:
+        """Try ``image`` (frame index ``frame``) in the lost segment's map; None when nothing is
+        being searched or this frame was tried already (a failed search after a gap is not
+        repeated when tracking then loses the same frame)."""
+        if self.target is None or self.target not in self.dbs or frame == self.tried:
             return None
+        self.tried = frame
         t0 = time.perf_counter()
         res = relocalize(image, self.K, vomap, self.dbs[self.target], self.cfg.reloc, self.seed)
         self.timings["reloc"] = self.timings.get("reloc", 0.0) + time.perf_counter() - t0
