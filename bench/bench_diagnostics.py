@@ -38,11 +38,12 @@ from amrvio.diagnostics.tracks import (
     TrackFrame,
     TrackingConfig,
     detection_mask,
+    diagnostics_tracker,
     prepare_track_frame,
     track_between,
+    tracker_mask,
 )
 from amrvio.tracking.detect import detect_corners
-from amrvio.tracking.lk import LkTracker
 from amrvio.types.camera import PinholeCamera
 
 W, H = 752, 480
@@ -65,7 +66,7 @@ def _frames(n: int) -> list[NDArray[np.uint8]]:
 def _blur_exposure_ms(frames: list[NDArray[np.uint8]]) -> float:
     tcfg, ecfg = TrackingConfig(), ExposureConfig()
     min_tracks = ParallaxReferenceConfig().min_tracks
-    tracker = LkTracker(tcfg.lk)
+    tracker = diagnostics_tracker(tcfg, W)
     scorer = BlurScorer()
     t0 = time.process_time()
     prev: ExposureFrame | None = None
@@ -80,7 +81,8 @@ def _blur_exposure_ms(frames: list[NDArray[np.uint8]]) -> float:
             fit_exposure_frames(prev, ef, pts[res.ok], res.pts[res.ok], ecfg)
             pts = res.pts[res.ok]
         if pts.shape[0] < min_tracks:
-            pts = detect_corners(cur.image.lk, tcfg.detector, mask=detection_mask(ef.bad))
+            pts = detect_corners(cur.image.lk, tcfg.detector, mask=tracker_mask(
+                detection_mask(ef.bad), cur.image.lk.shape, cur.image.levels)) * cur.image.scale
         prev, prev_t = ef, cur
     return (time.process_time() - t0) * 1e3 / len(frames)
 

@@ -25,6 +25,7 @@ are implausible (tracking failure): ``valid=False``, ``ev`` NaN and no flag.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
@@ -36,6 +37,7 @@ from amrvio.diagnostics.tracks import (
     TrackFrame,
     TrackingConfig,
     detection_mask,
+    diagnostics_tracker,
     prepare_track_frame,
     track_between,
     tracker_mask,
@@ -46,7 +48,7 @@ from amrvio.photometric.gain import GainFitConfig, fit_gain_offset
 from amrvio.tracking.detect import DetectorConfig, detect_corners
 from amrvio.tracking.lk import LkTracker
 
-F32 = NDArray[np.float32]
+F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
 
 
@@ -114,30 +116,67 @@ def _gain_config(cfg: ExposureConfig, linear: bool, levels: tuple[float, float])
                          fit_offset=not linear)
 
 
-def sample_patches(image: NDArray[np.generic], pts: NDArray[np.floating], radius: int) -> F32:
-    """Bilinear samples of (2r+1)^2 patches centred on (N, 2) points -> (N, (2r+1)^2) float32."""
-    offs = np.arange(-radius, radius + 1, dtype=np.float32)
-    ox, oy = np.meshgrid(offs, offs)
-    p = np.asarray(pts, dtype=np.float32)
-    mx = (p[:, 0:1] + ox.ravel()[None, :]).astype(np.float32)
-    my = (p[:, 1:2] + oy.ravel()[None, :]).astype(np.float32)
-    src = np.asarray(image, dtype=np.float32)
-    out: F32 = cv2.remap(src, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+@functools.lru_cache(maxsize=16)
+def _grid_offsets(side: int, row: int) -> NDArray[np.intp]:
+    """Flat offsets (side^2,) of a ``side`` x ``side`` pixel grid in an image of ``row``
+    entries per row (row-major, the grid's own rows first)."""
+    offs = np.arange(side, dtype=np.intp)
+    out = (offs[:, None] * row + offs[None, :]).ravel()
+    out.setflags(write=False)
     return out
 
 
 @dataclass(frozen=True, slots=True, eq=False)
 class ExposureFrame:
-    """A frame prepared for the patch fit: ``smooth`` (H, W) float32 box-filtered intensity
-    (linearised first when an inverse response is given) and ``bad`` (H, W) bool, True where the
-    box touches a saturated (>= 250) or under-exposed (<= 5) raw pixel or reaches outside the
-    image. ``linear``: linearised through an inverse response; ``clip_levels``: the raw clip
-    levels in the units of ``smooth``."""
+    """A frame prepared for the patch fit, as two integral images (cv2.integral), from which a
+    box mean and its clip flag at any pixel cost four look-ups each, so that only the patches
+    around tracked points are ever filtered: ``integral`` (H+1, W+1) of the intensity
+    (linearised first when an inverse response is given) and ``clip_integral`` (H+1, W+1) of the
+    raw pixels that are saturated (>= 250) or under-exposed (<= 5). ``box``: the side of the
+    smoothing box; ``linear``: linearised through an inverse response; ``clip_levels``: the raw
+    clip levels in the units of the intensity."""
 
-    smooth: F32
-    bad: NDArray[np.bool_]
+    integral: NDArray[np.float64]
+    clip_integral: NDArray[np.int32]
+    box: int
     linear: bool = False
     clip_levels: tuple[float, float] = (UNDEREXPOSED_DN, SATURATED_DN)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.integral.shape[0] - 1, self.integral.shape[1] - 1
+
+    def patch_grid(self, corner: NDArray[np.intp], radius: int, side: int
+                   ) -> tuple[F64, NDArray[np.bool_]]:
+        """Box means (N, side^2) on ``side`` x ``side`` integer grids that start ``radius``
+        pixels up and left of the (N, 2) integer pixels ``corner`` (row-major), and True where
+        a sample's box touches a clipped raw pixel, or where any box of the grid reaches outside
+        the image (the whole patch is then masked)."""
+        h, w = self.shape
+        k, row = self.box, w + 1
+        u0 = corner[:, 0] - radius - k // 2  # the first box's top-left pixel
+        v0 = corner[:, 1] - radius - k // 2
+        inside = (u0 >= 0) & (v0 >= 0) & (u0 <= w - side + 1 - k) & (v0 <= h - side + 1 - k)
+        i00 = (np.where(inside, v0 * row + u0, 0)[:, None]
+               + _grid_offsets(side, row)[None, :])
+        i01, i10, i11 = i00 + k, i00 + k * row, i00 + k * row + k
+        f, c = self.integral.reshape(-1), self.clip_integral.reshape(-1)
+        # int32 integrals: every partial difference is a sum over part of the image (no overflow)
+        sums = f.take(i11) - f.take(i01) - f.take(i10) + f.take(i00)
+        clipped = (c.take(i11) - c.take(i01) - c.take(i10) + c.take(i00)) > 0
+        mean = np.asarray(sums, np.float64) * (1.0 / (k * k))
+        return mean, clipped | ~inside[:, None]
+
+    @property
+    def bad(self) -> NDArray[np.bool_]:
+        """(H, W) True where the box touches a clipped raw pixel or reaches outside the image
+        (for feature detection, which wants the whole frame; the fit looks up its samples)."""
+        k, ci = self.box, self.clip_integral
+        counts = ci[k:, k:] - ci[:-k, k:] - ci[k:, :-k] + ci[:-k, :-k]  # boxes from their corner
+        bad = np.ones(self.shape, dtype=bool)
+        e = k // 2
+        bad[e : e + counts.shape[0], e : e + counts.shape[1]] = counts > 0
+        return bad
 
 
 def prepare_exposure_frame(
@@ -145,25 +184,26 @@ def prepare_exposure_frame(
     cfg: ExposureConfig | None = None,
     inverse_response: NDArray[np.floating] | None = None,
 ) -> ExposureFrame:
-    """Box-filter a grey frame (``cfg.smooth_px``) for :func:`fit_exposure_frames`. The low-pass
-    makes the fit insensitive to motion blur and to sub-pixel resampling, which both smooth
-    intensity and would otherwise read as a lower gain."""
+    """Prepare a grey frame for :func:`fit_exposure_frames`: the fit samples box means
+    (``cfg.smooth_px``) of it, which make the fit insensitive to motion blur and to sub-pixel
+    resampling (both smooth intensity and would otherwise read as a lower gain). Two integral
+    images cost less than filtering the whole frame (about 0.2 ms at 752x480)."""
     cfg = cfg or ExposureConfig()
     img = np.asarray(image)
     _check_grey(img, "image")
     k = max(1, cfg.smooth_px)
-    src = img if inverse_response is None else linearise(img, inverse_response).astype(np.float32)
+    if inverse_response is not None:
+        integral = cv2.integral(linearise(img, inverse_response).astype(np.float32),
+                                sdepth=cv2.CV_64F)
+    elif img.dtype != np.uint8:
+        integral = cv2.integral(img.astype(np.float32), sdepth=cv2.CV_64F)
+    else:  # exact in int32 up to 8.4 Mpixel
+        integral = cv2.integral(img, sdepth=cv2.CV_32S if img.size < 2**23 else cv2.CV_64F)
     if img.dtype != np.uint8:
         img = np.clip(img, 0, 255).astype(np.uint8)
-    clipped = cv2.inRange(img, int(UNDEREXPOSED_DN) + 1, int(SATURATED_DN) - 1) == 0
-    if k > 1:
-        smooth = cv2.boxFilter(src, cv2.CV_32F, (k, k), borderType=cv2.BORDER_REPLICATE)
-        bad = cv2.dilate(clipped.view(np.uint8), np.ones((k, k), np.uint8)) > 0
-        e = k // 2  # boxes that reach outside the image average replicated border pixels
-        bad[:e, :] = bad[-e:, :] = bad[:, :e] = bad[:, -e:] = True
-    else:
-        smooth, bad = src.astype(np.float32), clipped
-    return ExposureFrame(np.asarray(smooth, np.float32), np.asarray(bad, bool),
+    inside = cv2.inRange(img, int(UNDEREXPOSED_DN) + 1, int(SATURATED_DN) - 1)
+    clipped = cv2.threshold(inside, 0, 1, cv2.THRESH_BINARY_INV)[1]
+    return ExposureFrame(integral, cv2.integral(clipped, sdepth=cv2.CV_32S), k,
                          inverse_response is not None, _clip_levels(inverse_response))
 
 
@@ -197,14 +237,24 @@ def fit_exposure_frames(
     r = max(cfg.patch_radius, 1)
     # the curvature needs the patch's border ring, whose own weight is zero: only the inner
     # (2r-1)^2 samples enter the fit
-    xr = sample_patches(prev.smooth, q0, r)
+    xr, bad0 = prev.patch_grid(q0.astype(np.intp), r, 2 * r + 1)
     w = _curvature_weights(xr, r, cfg.curvature_dn)
     n = 2 * r + 1
     inner = (np.arange(1, n - 1)[:, None] * n + np.arange(1, n - 1)[None, :]).ravel()
-    x, w = xr[:, inner], w[:, inner]
-    y = sample_patches(cur.smooth, q1, r - 1)
-    bad0 = _sample_mask(prev.bad, q0, r - 1)
-    bad1 = _sample_mask(cur.bad, q1, r - 1)
+    x, w, bad0 = xr[:, inner], w[:, inner], bad0[:, inner]
+    # ``cur`` at the sub-pixel positions: every sample of a patch has the same fraction, so the
+    # patch is one bilinear blend of a (2r)^2 grid of integer box means; a sample is masked when
+    # any of its four neighbours' boxes clips
+    base = np.floor(q1)
+    f = (q1 - base)[:, None, None, :]
+    g, gbad = cur.patch_grid(base.astype(np.intp), r - 1, 2 * r)
+    m = 2 * r
+    g, gbad = g.reshape(-1, m, m), gbad.reshape(-1, m, m)
+    fx, fy = f[..., 0], f[..., 1]
+    y = ((1 - fy) * ((1 - fx) * g[:, :-1, :-1] + fx * g[:, :-1, 1:])
+         + fy * ((1 - fx) * g[:, 1:, :-1] + fx * g[:, 1:, 1:])).reshape(len(q1), -1)
+    bad1 = (gbad[:, :-1, :-1] | gbad[:, :-1, 1:] | gbad[:, 1:, :-1] | gbad[:, 1:, 1:]).reshape(
+        len(q1), -1)
     linear = prev.linear and cur.linear
     gcfg = _gain_config(cfg, linear, prev.clip_levels)
     fit = fit_gain_offset(x, y, mask=~(bad0 | bad1), weights=w, config=gcfg)
@@ -278,22 +328,7 @@ def fit_exposure_on_correspondences(
     )
 
 
-def _sample_mask(mask: NDArray[np.bool_], pts: NDArray[np.floating], radius: int) -> NDArray[
-    np.bool_
-]:
-    """Nearest-pixel samples of a boolean map on the patch grid (outside the image: True)."""
-    offs = np.arange(-radius, radius + 1)
-    ox, oy = np.meshgrid(offs, offs)
-    u = np.rint(pts[:, 0:1]).astype(np.intp) + ox.ravel()[None, :]
-    v = np.rint(pts[:, 1:2]).astype(np.intp) + oy.ravel()[None, :]
-    h, w = mask.shape
-    inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
-    out = np.ones(u.shape, dtype=bool)
-    out[inside] = mask[v[inside], u[inside]]
-    return out
-
-
-def _curvature_weights(x: F32, radius: int, scale_dn: float) -> NDArray[np.float64]:
+def _curvature_weights(x: F64, radius: int, scale_dn: float) -> NDArray[np.float64]:
     # Sub-pixel resampling error ~ (d^2 / 2) * Laplacian: trust flat samples, drop patch borders.
     n = 2 * radius + 1
     p = x.reshape(-1, n, n).astype(np.float64)
@@ -372,7 +407,7 @@ def estimate_exposure_change(
     _check_grey(c, "cur")
     if p.shape != c.shape:
         raise ShapeError(f"images differ in shape: {p.shape} vs {c.shape}")
-    tracker = LkTracker(tracking.lk)
+    tracker = diagnostics_tracker(tracking, p.shape[1])
     t0, t1 = prepare_track_frame(tracker, p), prepare_track_frame(tracker, c)
     f0 = prepare_exposure_frame(p, cfg, inverse_response)
     f1 = prepare_exposure_frame(c, cfg, inverse_response)
