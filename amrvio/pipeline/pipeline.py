@@ -28,8 +28,9 @@ from amrvio.estimator.scale_sources import CameraHeightScale
 from amrvio.frontend.keyframe_policy import KeyframeReason
 from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, TrackOutcome
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
-from amrvio.pipeline.records import EstimatorReport, FrameRecord, PoseStatus
+from amrvio.pipeline.records import EstimatorReport, FrameRecord, PipelineOutput, PoseStatus
 from amrvio.pipeline.recovery import MapRecovery, implausible_jump, link_to_previous
+from amrvio.pipeline.smear_motion import MotionHistory
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import Sim3, se3_matrix_inverse
 from amrvio.types.sensors import ImuData
@@ -49,25 +50,6 @@ class _Step:
     init: InitResult | None = None
     keyframe: KeyframeReport | None = None
     scale: HeightEstimate | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class PipelineOutput:
-    """The run: one record per frame (final poses), (N, 4, 4) ``T_world_cam`` of the refined
-    trajectory, keyframe frame indices, (P, 3) map points, the camera-height readings, the
-    per-frame scale and seconds per stage."""
-
-    records: tuple[FrameRecord, ...]
-    T_world_cam: F64
-    keyframe_indices: NDArray[np.int64]
-    map_points: F64
-    height_readings: tuple[HeightEstimate, ...]
-    frame_scale: F64
-    timings_s: dict[str, float]
-
-    @property
-    def stamps_ns(self) -> NDArray[np.int64]:
-        return np.array([r.t_ns for r in self.records], dtype=np.int64)
 
 
 class Pipeline:
@@ -100,6 +82,7 @@ class Pipeline:
         self.blur = BlurScorer(cfg.diagnostics.blur)
         self.records: list[FrameRecord] = []
         self.timings: dict[str, float] = {}
+        self.motion_history = MotionHistory()
 
     def _toc(self, stage: str, t0: float) -> None:
         self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - t0
@@ -157,8 +140,23 @@ class Pipeline:
             step = self._track_step(index, image, blurred, events)
         return self._emit(index, t_ns, blur, health, step, events)
 
+    def _with_motion(self, health: FrameHealth, t_ns: int) -> FrameHealth:
+        """The health record with the smear's translational part, from the VO's motion at
+        ``t_ns`` (this frame's pose when it was tracked) and its tracked map points."""
+        cam = self.diagnostics.camera if self.diagnostics is not None else None
+        if cam is None or not self.tracker.mapped or not self.mapping.segments:
+            return health
+        motion = self.motion_history.camera_motion(t_ns, self.tracker.tracks.ids,
+                                                   self.mapping.current.mapper.map, cam)
+        return health if motion is None or self.diagnostics is None else \
+            self.diagnostics.with_motion(health, motion)
+
     def _emit(self, index: int, t_ns: int, blur: BlurResult, health: FrameHealth | None,
               step: _Step, events: list[str]) -> FrameRecord:
+        tracked = step.anchor.status is PoseStatus.TRACKED and self.tracker.mapped
+        self.motion_history.observe(t_ns, step.T_cam_world if tracked else None, self._segment_id())
+        if health is not None:
+            health = self._with_motion(health, t_ns)
         self.composer.add(step.anchor)
         segs = self.mapping.segments
         T_wc = segs[-1].pose_in_world(step.T_cam_world) if segs else se3_matrix_inverse(step.T_cam_world)

@@ -11,6 +11,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
+import numpy as np
+from numpy.typing import NDArray
+
 from amrvio.diagnostics.blur import BlurResult
 from amrvio.diagnostics.frame import FrameHealth
 from amrvio.estimator.camera_height import HeightEstimate
@@ -18,6 +21,8 @@ from amrvio.estimator.initializer import InitResult
 from amrvio.estimator.local_mapping import KeyframeReport
 from amrvio.frontend.tracker import TrackingReport
 from amrvio.types.lie import SE3
+
+F64 = NDArray[np.float64]
 
 
 class PoseStatus(Enum):
@@ -74,4 +79,23 @@ class FrameRecord:
         return self.blur.is_blurred
 
 
-__all__ = ["EstimatorReport", "FrameRecord", "PoseStatus"]
+@dataclass(frozen=True, slots=True)
+class PipelineOutput:
+    """The run: one record per frame (final poses), (N, 4, 4) ``T_world_cam`` of the refined
+    trajectory, keyframe frame indices, (P, 3) map points, the camera-height readings, the
+    per-frame scale and seconds per stage."""
+
+    records: tuple[FrameRecord, ...]
+    T_world_cam: F64
+    keyframe_indices: NDArray[np.int64]
+    map_points: F64
+    height_readings: tuple[HeightEstimate, ...]
+    frame_scale: F64
+    timings_s: dict[str, float]
+
+    @property
+    def stamps_ns(self) -> NDArray[np.int64]:
+        return np.array([r.t_ns for r in self.records], dtype=np.int64)
+
+
+__all__ = ["EstimatorReport", "FrameRecord", "PipelineOutput", "PoseStatus"]
