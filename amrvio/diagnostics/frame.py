@@ -64,6 +64,7 @@ from amrvio.diagnostics.tracks import (
     track_between,
     tracker_mask,
 )
+from amrvio.diagnostics.vo_motion import MotionHistory
 from amrvio.errors import ShapeError
 from amrvio.tracking.detect import detect_corners
 from amrvio.tracking.lk import LkTracker
@@ -172,6 +173,7 @@ class FrameDiagnostics:
         span = max(self.config.excitation_window_s, 1.0)
         self._imu = _ImuBuffer(int(span * 1e9))
         self._trackers: dict[int, LkTracker] = {}  # by image width
+        self._poses = MotionHistory()  # the VO's poses, for the translational smear
         self._prev: _Previous | None = None
         self._ref = ParallaxReference()
         self._index = 0
@@ -208,6 +210,19 @@ class FrameDiagnostics:
             advice = max_exposure_for_smear(self.camera, pred.omega_cam_rad_s,
                                             self.config.smear_bound_px, motion=motion)
         return pred, advice
+
+    def observe_pose(self, t_ns: int, T_cam_world: F64 | None, segment: int | None) -> None:
+        """The pose the VO tracked for the frame at ``t_ns`` (None: none) in map ``segment``."""
+        self._poses.observe(t_ns, T_cam_world, segment)
+
+    def with_vo_motion(self, health: FrameHealth, points_world: F64) -> FrameHealth:
+        """``health`` with the smear's translational part, from the poses given to
+        :meth:`observe_pose` (up to this frame's) and the (N, 3) map points of the live tracks
+        (see :mod:`~amrvio.diagnostics.vo_motion`); unchanged without a camera or a motion."""
+        if self.camera is None:
+            return health
+        motion = self._poses.camera_motion(health.t_ns, points_world, self.camera)
+        return health if motion is None else self.with_motion(health, motion)
 
     def with_motion(self, health: FrameHealth, motion: CameraMotion) -> FrameHealth:
         """``health`` of a frame already processed, its smear predicted again with the camera's

@@ -30,7 +30,6 @@ from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, Track
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
 from amrvio.pipeline.records import EstimatorReport, FrameRecord, PipelineOutput, PoseStatus
 from amrvio.pipeline.recovery import MapRecovery, implausible_jump, link_to_previous
-from amrvio.pipeline.smear_motion import MotionHistory
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import Sim3, se3_matrix_inverse
 from amrvio.types.sensors import ImuData
@@ -82,7 +81,6 @@ class Pipeline:
         self.blur = BlurScorer(cfg.diagnostics.blur)
         self.records: list[FrameRecord] = []
         self.timings: dict[str, float] = {}
-        self.motion_history = MotionHistory()
 
     def _toc(self, stage: str, t0: float) -> None:
         self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - t0
@@ -140,23 +138,15 @@ class Pipeline:
             step = self._track_step(index, image, blurred, events)
         return self._emit(index, t_ns, blur, health, step, events)
 
-    def _with_motion(self, health: FrameHealth, t_ns: int) -> FrameHealth:
-        """The health record with the smear's translational part, from the VO's motion at
-        ``t_ns`` (this frame's pose when it was tracked) and its tracked map points."""
-        cam = self.diagnostics.camera if self.diagnostics is not None else None
-        if cam is None or not self.tracker.mapped or not self.mapping.segments:
-            return health
-        motion = self.motion_history.camera_motion(t_ns, self.tracker.tracks.ids,
-                                                   self.mapping.current.mapper.map, cam)
-        return health if motion is None or self.diagnostics is None else \
-            self.diagnostics.with_motion(health, motion)
-
     def _emit(self, index: int, t_ns: int, blur: BlurResult, health: FrameHealth | None,
               step: _Step, events: list[str]) -> FrameRecord:
-        tracked = step.anchor.status is PoseStatus.TRACKED and self.tracker.mapped
-        self.motion_history.observe(t_ns, step.T_cam_world if tracked else None, self._segment_id())
-        if health is not None:
-            health = self._with_motion(health, t_ns)
+        diag = self.diagnostics
+        if diag is not None:  # the smear's translational part, from the VO's motion
+            tracked = step.anchor.status is PoseStatus.TRACKED and self.tracker.mapped
+            diag.observe_pose(t_ns, step.T_cam_world if tracked else None, self._segment_id())
+            if health is not None and self.tracker.mapped and self.mapping.segments:
+                m, ids = self.mapping.current.mapper.map, self.tracker.tracks.ids
+                health = diag.with_vo_motion(health, m.xyz[ids[m.points_of(ids)]])
         self.composer.add(step.anchor)
         segs = self.mapping.segments
         T_wc = segs[-1].pose_in_world(step.T_cam_world) if segs else se3_matrix_inverse(step.T_cam_world)

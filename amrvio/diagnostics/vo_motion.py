@@ -1,10 +1,10 @@
 """The camera's motion as the VO knows it once a frame is tracked, for the translational smear.
 
 The diagnostics run before tracking and predict the smear from the gyro (rotation only). Once the
-frame has been tracked, the pipeline asks again with the camera's motion: the last ``HISTORY``
-tracked poses of the current map segment give the velocity of each interval at its mid-point,
-a least-squares line through them (constant acceleration) gives the velocity at the frame's
-mid-exposure, and the map points of the live tracks give the depths. A frame that was not
+frame has been tracked, the pipeline gives its pose and asks again with the map points of the
+live tracks: the last ``HISTORY`` tracked poses of the current map segment give the velocity of
+each interval at its mid-point, a least-squares line through them (constant acceleration) gives
+the velocity at the frame's mid-exposure, and the points give the depths. A frame that was not
 tracked (lost, blurred) takes the same line extrapolated to its time, up to ``MAX_AGE_FRAMES``
 frame intervals after the last pose. Velocity and depths are both in map units and the
 translational smear depends only on their ratio, so the monocular scale cancels: no metric
@@ -23,12 +23,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.diagnostics.smear import CameraMotion
-from amrvio.estimator.vo_map import VoMap
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import se3_matrix_inverse, so3_exp, so3_log
 
 F64 = NDArray[np.float64]
-I64 = NDArray[np.int64]
 
 MAX_POINTS = 300  # spread over the live tracks; the depth plane needs a few near each grid point
 MIN_POINTS = 8
@@ -53,10 +51,11 @@ class MotionHistory:
         if T_cam_world is not None and segment is not None:
             self._poses.append((int(t_ns), np.array(T_cam_world, dtype=np.float64)))
 
-    def camera_motion(self, t_ns: int, track_ids: I64, vo_map: VoMap,
-                      camera: CameraModel) -> CameraMotion | None:
+    def camera_motion(self, t_ns: int, points_world: F64, camera: CameraModel
+                      ) -> CameraMotion | None:
         """The camera's velocity (map units/s, camera frame) and angular rate at ``t_ns``, and
-        the depths and pixels of the tracked map points in the predicted camera, or None when
+        the depths and pixels of the (N, 3) tracked map points ``points_world`` (same segment) in
+        the predicted camera, or None when
         the last two poses are more than ``MAX_AGE_FRAMES`` intervals old, or too few points lie
         in front of the camera."""
         p = list(self._poses)
@@ -89,7 +88,7 @@ class MotionHistory:
         T_step = np.eye(4)
         T_step[:3, :3] = R_step.T
         T_step[:3, 3] = -R_step.T @ (v * h)
-        return _points(T_step @ T_last, track_ids, vo_map, camera, R_step.T @ v, R_step.T @ w)
+        return _points(T_step @ T_last, points_world, camera, R_step.T @ v, R_step.T @ w)
 
 
 def _rates(T_a: F64, T_b: F64, dt: float) -> tuple[F64, F64]:
@@ -101,14 +100,14 @@ def _rates(T_a: F64, T_b: F64, dt: float) -> tuple[F64, F64]:
     return -t / dt, R @ so3_log(R.T) / dt
 
 
-def _points(T_pred: F64, track_ids: I64, vo_map: VoMap, camera: CameraModel, v: F64,
+def _points(T_pred: F64, points_world: F64, camera: CameraModel, v: F64,
             w: F64) -> CameraMotion | None:
-    ids = track_ids[vo_map.points_of(track_ids)]
-    if ids.size < MIN_POINTS:
+    P = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
+    if P.shape[0] < MIN_POINTS:
         return None
-    if ids.size > MAX_POINTS:
-        ids = ids[np.linspace(0, ids.size - 1, MAX_POINTS).round().astype(np.int64)]
-    X = vo_map.xyz[ids] @ T_pred[:3, :3].T + T_pred[:3, 3]
+    if P.shape[0] > MAX_POINTS:
+        P = P[np.linspace(0, P.shape[0] - 1, MAX_POINTS).round().astype(np.int64)]
+    X = P @ T_pred[:3, :3].T + T_pred[:3, 3]
     X = X[X[:, 2] > 1e-9]
     if X.shape[0] < MIN_POINTS or not (np.all(np.isfinite(v)) and np.all(np.isfinite(w))):
         return None
