@@ -20,9 +20,11 @@ import numpy as np
 
 from amrvio.errors import DatasetFormatError, TrajectoryFormatError
 from amrvio.io.base import (
+    WHEEL_FILE,
     Dataset,
     first_image_shape,
     read_imu_csv,
+    read_wheel_csv,
     rethrow_as_dataset_error,
     warn_missing_images,
 )
@@ -169,6 +171,8 @@ def read_asl(path: Path, kind: str = "euroc", calib: Path | None = None) -> Data
             imu_noise = read_imu_noise_file(noise_path)
             break
 
+    wheel_path = base / WHEEL_FILE
+    wheel = read_wheel_csv(wheel_path) if wheel_path.is_file() else None
     groundtruth = _groundtruth(mav)
     pcalib_path, vignette_path = find_photometric(
         [cam_dir, dso / "cam0", mav, base, *sorted(base.glob("photometric*"))]
@@ -186,4 +190,5 @@ def read_asl(path: Path, kind: str = "euroc", calib: Path | None = None) -> Data
         groundtruth_frame="body" if groundtruth is not None else "",
         inverse_response=None if inverse_response is None else np.asarray(inverse_response),
         vignette=vignette,
+        wheel=wheel,
     )

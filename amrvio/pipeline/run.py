@@ -70,7 +70,8 @@ def run_pipeline(
         raise DatasetFormatError(dataset.root, "the dataset has no camera calibration; pass one")
     if diagnostics is None and cfg.diagnose:
         diagnostics = setup_diagnostics(dataset, cfg.diagnostics)
-    pipe = Pipeline(cam, cfg, diagnostics.stage if diagnostics is not None else None)
+    pipe = Pipeline(cam, cfg, diagnostics.stage if diagnostics is not None else None,
+                    wheel=dataset.wheel)
     expo_default = diagnostics.config.assumed_exposure_s if diagnostics is not None else None
     frames = dataset.frames[:max_frames] if max_frames else dataset.frames
     it: Iterable[Frame] = frames
