@@ -205,7 +205,7 @@ HELP: dict[str, str] = {
     "scale.camera_height_m": "camera height above a flat floor (m); null when unknown",
     "scale.half_window": "keyframes on each side of the running median of scale readings",
     "scale.wheel": "scale from wheel odometry (replaces the camera height when the recording has it)",
-    "scale.wheel.enabled": "use the recording's wheel odometry for the scale",
+    "scale.wheel.enabled": "use the recording's wheel odometry for the scale (a ground robot)",
     "scale.wheel.min_distance_m": "wheel distance between keyframes below which a pair gives no reading (m)",
     "scale.wheel.max_turn_deg": "keyframe pairs that turned more give no reading (deg)",
     "scale.wheel.half_window": "keyframe readings on each side of the running median",

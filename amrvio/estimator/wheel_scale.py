@@ -32,12 +32,14 @@ I64 = NDArray[np.int64]
 
 @dataclass(frozen=True, slots=True)
 class WheelScaleConfig:
-    """``enabled``: use wheel odometry when the recording has it (it then replaces the camera
-    height as the scale source); ``min_distance_m``: wheel distance between keyframes below which
+    """``enabled``: use the recording's wheel odometry (it then replaces the camera height as the
+    scale source). Off by default: a wheel file does not say that the camera rides on a
+    non-holonomic ground robot (the simulator writes one for hand-held motions too), and only
+    then is the wheel distance the camera's path; ``min_distance_m``: wheel distance between keyframes below which
     a pair gives no reading; ``max_turn_deg``: a larger rotation between the keyframes gives none
     either; ``half_window``: keyframe readings on each side of the running median."""
 
-    enabled: bool = True
+    enabled: bool = False
     min_distance_m: float = 0.05
     max_turn_deg: float = 10.0
     half_window: int = 10
