@@ -20,7 +20,8 @@ from amrvio.errors import ShapeError
 from amrvio.tracking.brightness import (
     AffineBrightness,
     Invariance,
-    fit_affine_quantiles,
+    affine_from_quantiles,
+    image_quantiles,
     normalise_for_tracking,
 )
 
@@ -94,10 +95,24 @@ class TrackResult:
 
 
 class LkTracker:
-    """Tracks points from one image to another. No state between calls apart from the config."""
+    """Tracks points from one image to another. No state between calls apart from the config
+    and a memo of the intensity quantiles of the last images seen (a streaming caller passes
+    each image twice: as the current one, then as the previous one)."""
 
     def __init__(self, config: LkConfig | None = None) -> None:
         self.config = config or LkConfig()
+        self._quantiles: list[tuple[U8, bytes, F64]] = []
+
+    def _image_quantiles(self, img: U8) -> F64:
+        """``image_quantiles(img)``, reused for the same array object with the same sampled
+        pixels (a caller that refills one buffer gets fresh quantiles)."""
+        probe = img[::7, ::11].tobytes()
+        for seen, seen_probe, q in self._quantiles:
+            if seen is img and seen_probe == probe:
+                return q
+        q = image_quantiles(img)
+        self._quantiles = [*self._quantiles[-1:], (img, probe, q)]
+        return q
 
     def prepare(self, image: U8) -> TrackImage:
         """Prepare an (H, W) uint8 image once (a streaming caller keeps the previous one)."""
@@ -140,7 +155,8 @@ class LkTracker:
         bright = AffineBrightness()
         ref = a.lk
         if cfg.invariance is Invariance.AFFINE:
-            bright = fit_affine_quantiles(a.raw, b.raw)
+            bright = affine_from_quantiles(self._image_quantiles(a.raw),
+                                           self._image_quantiles(b.raw))
             ref = a.lk if bright.is_identity() else bright.apply(a.lk)
         s = a.scale
         win = (cfg.win_size, cfg.win_size)
