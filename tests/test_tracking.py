@@ -153,6 +153,14 @@ def test_forward_backward_check_rejects_occluded_points() -> None:
     assert with_fb.n_fb_rejected >= 1
     no_fb = _lk(Invariance.NONE, fb_thresh_px=None).track(img0, img1, pts)
     assert no_fb.n_fb_rejected == 0 and no_fb.ok[occluded].mean() > with_fb.ok[occluded].mean()
+    # the backward pass's own pyramid: as deep as the forward pass, the same result; at full
+    # resolution only it is cheaper but lets more occluded points through (why the VO keeps
+    # the full depth), and the positions stay those of the forward pass
+    same = _lk(Invariance.NONE, fb_thresh_px=0.5, fb_pyr_levels=3).track(img0, img1, pts)
+    assert np.array_equal(same.ok, with_fb.ok) and np.array_equal(same.pts, with_fb.pts)
+    fine = _lk(Invariance.NONE, fb_thresh_px=0.5, fb_pyr_levels=0).track(img0, img1, pts)
+    assert fine.ok[occluded].mean() > with_fb.ok[occluded].mean()
+    assert fine.ok[~occluded].mean() > 0.8 and np.array_equal(fine.pts, with_fb.pts)
 
 
 def _scene_pair() -> tuple[np.ndarray, np.ndarray, np.ndarray]:

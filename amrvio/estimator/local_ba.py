@@ -1,8 +1,9 @@
 """Local sliding-window bundle adjustment with a Huber loss.
 
-Two interchangeable back-ends on the same problem (chosen by measured speed, bench/bench_vo.py):
+Interchangeable back-ends on the same problem (chosen by measured speed, bench/bench_vo.py):
 - ``solve_ba_scipy``: SciPy ``least_squares`` (TRF, Huber, analytic sparse Jacobian, LSMR);
-- ``solve_ba_gtsam``: GTSAM Levenberg-Marquardt, SEQUENTIAL_CHOLESKY, robust projection factors.
+- ``solve_ba_gtsam``: GTSAM Levenberg-Marquardt, SEQUENTIAL_CHOLESKY, robust projection factors;
+- ``estimator.ba_schur.solve_ba_schur``: the same LM in NumPy, points eliminated first.
 Gauge: poses flagged ``fixed`` are held constant (fix two poses in monocular BA: 7 DoF).
 """
 

@@ -51,7 +51,9 @@ class LkConfig:
     backward pass). ``max_error``: bound on LK's mean absolute patch residual (None: none).
     ``border_px``: tracks ending closer to the edge are dropped (``border <= x < w - border``).
     ``epipolar``: None for no epipolar check. ``max_width_px``: wider images are tracked on the
-    first pyramid level narrower than it (None: full resolution).
+    first pyramid level narrower than it (None: full resolution). ``fb_pyr_levels``: pyramid
+    levels of the backward pass (None: ``pyr_levels``); it starts where the point came from, so
+    a consistent track needs no coarse level, and each level costs a full window per point.
     """
 
     invariance: Invariance = Invariance.AFFINE
@@ -64,6 +66,7 @@ class LkConfig:
     border_px: float = 4.0
     epipolar: EpipolarConfig | None = field(default_factory=EpipolarConfig)
     max_width_px: int | None = None
+    fb_pyr_levels: int | None = None
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -181,8 +184,9 @@ class LkTracker:
         ok &= np.isfinite(p1f).all(axis=1)
         n_fb = 0
         if cfg.fb_thresh_px is not None:
+            fb_levels = cfg.pyr_levels if cfg.fb_pyr_levels is None else cfg.fb_pyr_levels
             pb, stb, _ = cv2.calcOpticalFlowPyrLK(b.lk, ref, p1, p0.copy(), winSize=win,
-                                                  maxLevel=cfg.pyr_levels, criteria=crit,
+                                                  maxLevel=fb_levels, criteria=crit,
                                                   flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
             ok &= stb.ravel() == 1
             fb = np.linalg.norm(_from_lk(pb.reshape(-1, 2), s) - p_prev, axis=1)
