@@ -15,8 +15,11 @@ frame had when it was processed, and of the refined ones, after the run.
 
 Sequences: KITTI 00 frames 0-199 (1241x376, ../shared/data) and a simulated 752x480 corridor with
 two blur bursts and three EV steps (``amrvio simulate``). Also written: a cProfile summary of one
-KITTI run (bench/results/speed_profile.txt), and the peak memory of runs over simulated driving
-of increasing length, each in its own process.
+KITTI run (bench/results/speed_profile.txt), the local BA's two solvers on the BA problems of
+that run, whether GTSAM's optimize() holds the GIL, settings that make a stage cheaper (measured,
+not adopted), and the peak memory of runs over simulated driving of increasing length (0.5, 1, 2
+minutes at 320x240 and 5 fps: longer runs take too long on the 2 shared cores), each in its own
+process.
 
 Run alone: ``.venv/bin/python -m bench.bench_speed [--quick]``.
 """
@@ -41,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.config import PipelineConfig
+from amrvio.estimator.local_ba import BAProblem, BAResult
 from amrvio.eval.evaluate import evaluate
 from amrvio.io.base import Dataset
 from amrvio.io.dataset import open_dataset
@@ -247,12 +251,33 @@ def _sim_gt(ds: Dataset) -> Trajectory:
     return ds.groundtruth.right_multiplied(ds.T_body_cam)
 
 
-def write_profile(ds: Dataset, gt: Trajectory, path: Path) -> None:
-    """cProfile of one KITTI run: top 25 by cumulative and by own time."""
+@contextlib.contextmanager
+def _recording_ba(into: list[BAProblem]) -> Iterator[None]:
+    """The local BA problems the mapper solves (GTSAM back-end) are appended to ``into``."""
+    from amrvio.estimator import mapper
+
+    saved = mapper.solve_ba_gtsam
+
+    def record(prob: BAProblem, max_iterations: int = 10) -> BAResult:
+        into.append(prob)
+        return saved(prob, max_iterations)
+
+    setattr(mapper, "solve_ba_gtsam", record)  # noqa: B010
+    try:
+        yield
+    finally:
+        setattr(mapper, "solve_ba_gtsam", saved)  # noqa: B010
+
+
+def write_profile(ds: Dataset, gt: Trajectory, path: Path) -> list[BAProblem]:
+    """cProfile of one KITTI run: top 25 by cumulative and by own time. Returns the local BA
+    problems of the run."""
+    problems: list[BAProblem] = []
     prof = cProfile.Profile()
-    prof.enable()
-    timed_run(ds, gt)
-    prof.disable()
+    with _recording_ba(problems):
+        prof.enable()
+        timed_run(ds, gt)
+        prof.disable()
     buf = io.StringIO()
     buf.write("# cProfile of one `amrvio run`-like pass over KITTI 00 frames 0-199 (one thread; "
               "bench/bench_speed.py; cProfile inflates Python-heavy code)\n\n")
@@ -261,29 +286,100 @@ def write_profile(ds: Dataset, gt: Trajectory, path: Path) -> None:
         st = pstats.Stats(prof, stream=buf)
         st.strip_dirs().sort_stats(key).print_stats(25)
     path.write_text(buf.getvalue(), encoding="utf-8")
+    return problems
 
+
+def ba_solver_rows(problems: list[BAProblem], iterations: int) -> list[Row]:
+    """GTSAM vs the NumPy Schur LM on the same local BA problems (CPU time per problem, final
+    cost, keyframe positions)."""
+    from amrvio.estimator.ba_schur import huber_cost, solve_ba_schur
+    from amrvio.estimator.local_ba import solve_ba_gtsam
+
+    t_g, t_s, dpos, dcost = [], [], [], []
+    for prob in problems:
+        t0 = time.thread_time()
+        g = solve_ba_gtsam(prob, iterations)
+        t_g.append(time.thread_time() - t0)
+        t0 = time.thread_time()
+        sc = solve_ba_schur(prob, iterations)
+        t_s.append(time.thread_time() - t0)
+        dpos.append(float(np.abs(g.T_cam_world[:, :3, 3] - sc.T_cam_world[:, :3, 3]).max()))
+        cg = huber_cost(g.residual_px, prob.huber_px)
+        dcost.append((huber_cost(sc.residual_px, prob.huber_px) - cg) / cg)
+    sizes = (f"{len(problems)} local BAs of one KITTI 00 0-199 run, median "
+             f"{np.median([len(p.points) for p in problems]):.0f} points, "
+             f"{np.median([len(p.obs_cam) for p in problems]):.0f} observations, "
+             f"{iterations} iterations max")
+    return [
+        {"name": "speed local BA gtsam LM per keyframe", "value": 1e3 * statistics.median(t_g),
+         "unit": "ms", "note": f"CPU, median; {sizes}"},
+        {"name": "speed local BA NumPy Schur LM per keyframe", "value":
+            1e3 * statistics.median(t_s), "unit": "ms",
+         "note": f"same problems; final cost vs gtsam: median {np.median(dcost):+.1e}, max "
+                 f"{max(dcost):+.1e} (relative); keyframe positions differ by "
+                 f"{np.median(dpos):.1e} (median), {max(dpos):.1e} (max) map units"},
+    ]
+
+
+def gil_row(problem: BAProblem) -> Row:
+    """Whether GTSAM's optimize() lets another Python thread run: the rate of a Python loop on
+    the main thread while optimize() runs in a worker, against its rate alone."""
+    import threading
+
+    import gtsam
+
+    from amrvio.estimator import local_ba
+
+    def spin(seconds: float) -> float:
+        n, t0 = 0, _WALL()
+        while _WALL() - t0 < seconds:
+            n += 1
+        return n / seconds
+
+    alone = spin(0.5)
+    done = threading.Event()
+    span: list[float] = []
+
+    def work() -> None:
+        t0 = _WALL()
+        for _ in range(3):
+            local_ba.solve_ba_gtsam(problem, 8)
+        span.append(_WALL() - t0)
+        done.set()
+
+    worker = threading.Thread(target=work)
+    n, t0 = 0, _WALL()
+    worker.start()
+    while not done.is_set():
+        n += 1
+    rate = n / (_WALL() - t0)
+    worker.join()
+    return {"name": "speed GIL: Python progress while gtsam BA runs in a thread",
+            "value": 100.0 * rate / alone, "unit": "%",
+            "note": f"gtsam {getattr(gtsam, '__version__', '?')}; main-thread loop rate during 3 local BAs in a "
+                    f"worker ({1e3 * span[0]:.0f} ms) vs alone; the wrapper holds the GIL in "
+                    "optimize() when this is far below 100 %, so a BA thread cannot overlap "
+                    "the tracker (and on one core it could not add throughput anyway)"}
 
 # ------------------------------------------------------------------ peak memory
 _MEM_CHILD = """
-import json, resource, sys, tracemalloc
-from pathlib import Path
+import json, resource, sys
 from amrvio.io.dataset import open_dataset
 from amrvio.pipeline.run import run_pipeline
 from amrvio.pipeline.threads import limit_native_threads
 limit_native_threads(1)
-ds = open_dataset(sys.argv[1])
-tracemalloc.start()
-out = run_pipeline(ds)
-_, peak = tracemalloc.get_traced_memory()
-print(json.dumps({"frames": len(out.records), "tracemalloc_peak_mb": peak / 2**20,
+out = run_pipeline(open_dataset(sys.argv[1]))
+print(json.dumps({"frames": len(out.records), "keyframes": len(out.keyframe_indices),
                   "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 """
 
 
 def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float) -> list[Row]:
-    """Peak memory of the VO over simulated driving of each length, each run in its own
-    process (Python heap peak by tracemalloc; the process's ru_maxrss)."""
+    """Peak memory (ru_maxrss) of the VO over simulated driving of each length, each run in
+    its own process; the last row is the growth per minute between the shortest and the
+    longest run."""
     rows: list[Row] = []
+    peaks: list[float] = []
     with tempfile.TemporaryDirectory() as td:
         for mins in minutes:
             seq = sim_corridor(Path(td) / f"m{mins:g}", 60.0 * mins, width, height, fps,
@@ -291,14 +387,39 @@ def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float)
             res = subprocess.run([sys.executable, "-c", _MEM_CHILD, str(seq)], check=True,
                                  capture_output=True, text=True, cwd=ROOT)
             fig = json.loads(res.stdout.strip().splitlines()[-1])
-            note = (f"{fig['frames']} frames, corridor {width}x{height} at {fps:g} fps, "
-                    "own process")
-            rows += [
-                {"name": f"speed memory {mins:g} min driving, Python heap peak",
-                 "value": fig["tracemalloc_peak_mb"], "unit": "MiB", "note": note + "; tracemalloc"},
-                {"name": f"speed memory {mins:g} min driving, max RSS",
-                 "value": fig["maxrss_mb"], "unit": "MiB", "note": note + "; ru_maxrss"},
-            ]
+            peaks.append(float(fig["maxrss_mb"]))
+            rows.append({"name": f"speed memory {mins:g} min driving, max RSS",
+                         "value": fig["maxrss_mb"], "unit": "MiB",
+                         "note": f"{fig['frames']} frames, {fig['keyframes']} keyframes, corridor "
+                                 f"{width}x{height} at {fps:g} fps, own process (ru_maxrss)"})
+    if len(minutes) > 1:
+        slope = (peaks[-1] - peaks[0]) / (minutes[-1] - minutes[0])
+        rows.append({"name": "speed memory growth per minute of driving", "value": slope,
+                     "unit": "MiB/min",
+                     "note": f"max RSS between {minutes[0]:g} and {minutes[-1]:g} min; the maps, "
+                             "frame records and relocalisation keyframes are kept for the run"})
+    return rows
+
+
+# settings that cut a stage's cost, measured against the default and not adopted (see note)
+ALTERNATIVES: tuple[tuple[str, dict[str, object]], ...] = (
+    ("ba_backend=schur", {"mapping": {"mapper": {"ba_backend": "schur"}}}),
+    ("fb_pyr_levels=0", {"tracking": {"klt": {"fb_pyr_levels": 0}}}),
+    ("anchor.pyr_levels=0", {"mapping": {"anchor": {"pyr_levels": 0}}}),
+)
+
+
+def alternative_rows(tag: str, ds: Dataset, gt: Trajectory) -> list[Row]:
+    """One run per alternative setting: throughput and refined ATE next to the default's."""
+    from amrvio.config import config_from_dict
+
+    rows: list[Row] = []
+    for name, over in ALTERNATIVES:
+        r = timed_run(ds, gt, config_from_dict(over, "bench_speed"))
+        rows.append({"name": f"speed {tag} [{name}] mono VO throughput",
+                     "value": r.n_frames / r.cpu_s, "unit": "frames/s",
+                     "note": f"1 run; Sim3 ATE {r.ate_refined_pct:.3f} % refined, "
+                             f"{r.ate_online_pct:.3f} % online; not the default"})
     return rows
 
 
@@ -312,13 +433,21 @@ def run(quick: bool) -> list[Row]:
                      "note": f"{KITTI} absent"})
     else:
         ds, gt = kitti
-        rows += measure("kitti00 0-199 1241x376", ds, gt, repeats, 34.0, 0.65)
-        write_profile(ds, gt, PROFILE_TXT)
+        tag = "kitti00 0-199 1241x376"
+        rows += measure(tag, ds, gt, repeats, 34.0, 0.65)
+        problems = write_profile(ds, gt, PROFILE_TXT)
+        rows += ba_solver_rows(problems[:: 4 if quick else 1], 8)
+        rows.append(gil_row(problems[len(problems) // 2]))
+        if not quick:
+            rows += alternative_rows(tag, ds, gt)
     with tempfile.TemporaryDirectory() as td:
         seq = sim_corridor(Path(td) / "corridor", 6.0 if quick else 10.0)
         ds = open_dataset(str(seq))
-        rows += measure("sim corridor 752x480 blur+EV", ds, _sim_gt(ds), repeats, 60.0, None)
-    rows += memory_rows((0.5, 2.0) if quick else (1.0, 5.0), 376, 240, 10.0)
+        tag = "sim corridor 752x480 blur+EV"
+        rows += measure(tag, ds, _sim_gt(ds), repeats, 60.0, None)
+        if not quick:
+            rows += alternative_rows(tag, ds, _sim_gt(ds))
+    rows += memory_rows((0.25, 0.5) if quick else (0.5, 1.0, 2.0), 320, 240, 5.0)
     return rows
 
 
