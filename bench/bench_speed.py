@@ -273,14 +273,14 @@ def write_profile(ds: Dataset, gt: Trajectory, path: Path) -> list[BAProblem]:
     """cProfile of one KITTI run: top 25 by cumulative and by own time. Returns the local BA
     problems of the run."""
     problems: list[BAProblem] = []
-    prof = cProfile.Profile()
+    prof = cProfile.Profile(time.process_time)  # CPU time: the machine is shared
     with _recording_ba(problems):
         prof.enable()
         timed_run(ds, gt)
         prof.disable()
     buf = io.StringIO()
-    buf.write("# cProfile of one `amrvio run`-like pass over KITTI 00 frames 0-199 (one thread; "
-              "bench/bench_speed.py; cProfile inflates Python-heavy code)\n\n")
+    buf.write("# cProfile (process CPU time) of one `amrvio run`-like pass over KITTI 00 frames "
+              "0-199 (one thread; bench/bench_speed.py; cProfile inflates Python-heavy code)\n\n")
     for key in ("cumulative", "tottime"):
         buf.write(f"## top 25 by {key}\n")
         st = pstats.Stats(prof, stream=buf)
