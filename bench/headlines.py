@@ -1,7 +1,7 @@
 """The figures that open bench/results/results.md, with their targets.
 
 A benchmark row that carries ``"target"`` (text) and ``"pass"`` (bool) is a headline by itself
-(bench_diagnostics, bench_diag_truth). The rows below come from modules that state their goal in
+(bench_diagnostics, bench_diag_truth, bench_speed). The rows below come from modules that state their goal in
 the note only; they are listed here with the goal, so that the headline table can judge them.
 A listed row that a run did not produce shows as missing.
 """

@@ -30,7 +30,7 @@ from typing import Any
 import bench
 from bench.headlines import HEADLINES
 
-QUICK_MODULES = ("bench_diagnostics", "bench_diag_truth")
+QUICK_MODULES = ("bench_diagnostics", "bench_diag_truth", "bench_speed")
 
 
 def _modules(only: list[str] | None) -> list[str]:

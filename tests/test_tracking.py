@@ -153,6 +153,14 @@ def test_forward_backward_check_rejects_occluded_points() -> None:
     assert with_fb.n_fb_rejected >= 1
     no_fb = _lk(Invariance.NONE, fb_thresh_px=None).track(img0, img1, pts)
     assert no_fb.n_fb_rejected == 0 and no_fb.ok[occluded].mean() > with_fb.ok[occluded].mean()
+    # the backward pass's own pyramid: as deep as the forward pass, the same result; at full
+    # resolution only it is cheaper but lets more occluded points through (why the VO keeps
+    # the full depth), and the positions stay those of the forward pass
+    same = _lk(Invariance.NONE, fb_thresh_px=0.5, fb_pyr_levels=3).track(img0, img1, pts)
+    assert np.array_equal(same.ok, with_fb.ok) and np.array_equal(same.pts, with_fb.pts)
+    fine = _lk(Invariance.NONE, fb_thresh_px=0.5, fb_pyr_levels=0).track(img0, img1, pts)
+    assert fine.ok[occluded].mean() > with_fb.ok[occluded].mean()
+    assert fine.ok[~occluded].mean() > 0.8 and np.array_equal(fine.pts, with_fb.pts)
 
 
 def _scene_pair() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -241,3 +249,39 @@ def test_tracking_is_deterministic() -> None:
     a = LkTracker().track(img0, img1, pts)
     b = LkTracker().track(img0, img1, pts)
     assert np.array_equal(a.pts, b.pts) and np.array_equal(a.ok, b.ok)
+
+
+def test_image_quantiles_equal_numpy_percentile() -> None:
+    """The histogram read-off gives np.percentile's values exactly (uint8 images of any size,
+    stride and intensity spread)."""
+    from amrvio.tracking.brightness import QUANTILES, image_quantiles
+
+    rng = np.random.default_rng(4)
+    for k in range(300):
+        h, w = (int(v) for v in rng.integers(1, 200, 2))
+        if k % 3 == 0:
+            img = rng.integers(0, 256, (h, w), dtype=np.uint8)
+        elif k % 3 == 1:
+            img = np.full((h, w), int(rng.integers(0, 256)), dtype=np.uint8)
+        else:
+            img = np.clip(rng.normal(rng.uniform(0, 255), rng.uniform(0, 40), (h, w)), 0,
+                          255).astype(np.uint8)
+        stride = int(rng.integers(1, 6))
+        assert np.array_equal(image_quantiles(img, stride),
+                              np.percentile(img[::stride, ::stride], QUANTILES))
+
+
+def test_brightness_memo_follows_a_refilled_buffer() -> None:
+    """A caller that refills one image buffer gets the brightness change of the new content,
+    as a fresh tracker computes it."""
+    img = _img()
+    pts = detect_corners(img, DetectorConfig(max_corners=80, border_px=30))
+    buf = img.copy()
+    tr = LkTracker(LkConfig(epipolar=None))
+    tr.track(buf, img, pts)
+    buf[:] = np.clip(1.4 * img.astype(np.float64) + 10, 0, 255).astype(np.uint8)  # same array
+    memo = tr.track(buf, img, pts)
+    fresh = LkTracker(LkConfig(epipolar=None)).track(buf.copy(), img, pts)
+    assert memo.brightness == fresh.brightness
+    assert not memo.brightness.is_identity()
+    assert np.array_equal(memo.pts, fresh.pts)

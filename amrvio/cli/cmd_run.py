@@ -58,9 +58,10 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
                              "alignment assume brightness constancy (ablation)")
     parser.add_argument("--no-blur-gating", action="store_true",
                         help="use blurred frames like sharp ones (ablation; config: blur_gating)")
-    parser.add_argument("--ba-backend", choices=("gtsam", "scipy"), default=None,
+    parser.add_argument("--ba-backend", choices=("gtsam", "schur", "scipy"), default=None,
                         help="local bundle adjustment solver (default: gtsam, LM with "
-                             "SEQUENTIAL_CHOLESKY; config: mapping.mapper.ba_backend)")
+                             "SEQUENTIAL_CHOLESKY; schur: the same LM in NumPy on the reduced "
+                             "camera system, about 2x faster; config: mapping.mapper.ba_backend)")
     parser.add_argument("--seed", type=seed_int, default=None,
                         help=f"seed of every random choice, in {interval(*SEED_RANGE)} "
                              "(default 0; config: seed)")

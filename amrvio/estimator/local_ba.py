@@ -1,8 +1,9 @@
 """Local sliding-window bundle adjustment with a Huber loss.
 
-Two interchangeable back-ends on the same problem (chosen by measured speed, bench/bench_vo.py):
+Interchangeable back-ends on the same problem (chosen by measured speed, bench/bench_vo.py):
 - ``solve_ba_scipy``: SciPy ``least_squares`` (TRF, Huber, analytic sparse Jacobian, LSMR);
-- ``solve_ba_gtsam``: GTSAM Levenberg-Marquardt, SEQUENTIAL_CHOLESKY, robust projection factors.
+- ``solve_ba_gtsam``: GTSAM Levenberg-Marquardt, SEQUENTIAL_CHOLESKY, robust projection factors;
+- ``estimator.ba_schur.solve_ba_schur``: the same LM in NumPy, points eliminated first.
 Gauge: poses flagged ``fixed`` are held constant (fix two poses in monocular BA: 7 DoF).
 """
 
@@ -164,8 +165,10 @@ def solve_ba_gtsam(prob: BAProblem, max_iterations: int = 10) -> BAResult:
     values = gtsam.Values()
     k = prob.T_cam_world.shape[0]
     n_pts = len(prob.points)
-    xk = [gtsam.symbol("x", i) for i in range(k)]
-    lk = [gtsam.symbol("l", j) for j in range(n_pts)]
+    # plain integer keys, points first then poses (the order symbols l* < x* had): they pass
+    # gtsam.utilities' float64 key arrays exactly (< 2^53), so that the factors of a camera are
+    # added in one C++ call
+    xk = [n_pts + i for i in range(k)]
     for i in range(k):
         Ti = prob.T_cam_world[i]
         Twc = np.eye(4)
@@ -176,10 +179,13 @@ def solve_ba_gtsam(prob: BAProblem, max_iterations: int = 10) -> BAResult:
         if prob.fixed[i]:
             graph.add(gtsam.NonlinearEqualityPose3(xk[i], pose))
     for j in range(n_pts):
-        values.insert(lk[j], prob.points[j])
-    for c, p, uv in zip(prob.obs_cam.tolist(), prob.obs_point.tolist(), prob.obs_px,
-                        strict=True):
-        graph.add(gtsam.GenericProjectionFactorCal3_S2(uv, noise, xk[c], lk[p], cal))
+        values.insert(j, prob.points[j])
+    cam = prob.obs_cam
+    starts = np.flatnonzero(np.r_[True, cam[1:] != cam[:-1]])
+    for a, b in zip(starts, np.r_[starts[1:], len(cam)], strict=True):
+        gtsam.utilities.insertProjectionFactors(
+            graph, xk[int(cam[a])], prob.obs_point[a:b].astype(np.float64).reshape(-1, 1),
+            np.ascontiguousarray(prob.obs_px[a:b].T), noise, cal)
     params = gtsam.LevenbergMarquardtParams()
     params.setLinearSolverType("SEQUENTIAL_CHOLESKY")
     params.setMaxIterations(max_iterations)
@@ -192,7 +198,7 @@ def solve_ba_gtsam(prob: BAProblem, max_iterations: int = 10) -> BAResult:
         T[i] = np.eye(4)
         T[i, :3, :3] = Twc[:3, :3].T
         T[i, :3, 3] = -Twc[:3, :3].T @ Twc[:3, 3]
-    X = np.array([out.atPoint3(lk[j]) for j in range(n_pts)]).reshape(n_pts, 3)
+    X = np.asarray(gtsam.utilities.extractPoint3(out), dtype=np.float64).reshape(n_pts, 3)
     return BAResult(T, X, _pixel_errors(prob, T, X), int(opt.iterations()), initial)
 
 

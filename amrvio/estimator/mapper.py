@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from amrvio.estimator.ba_schur import solve_ba_schur
 from amrvio.estimator.local_ba import (
     BAProblem,
     BAReport,
@@ -30,15 +31,16 @@ F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 log = logging.getLogger(__name__)
 
-BA_BACKENDS = ("gtsam", "scipy")
+BA_BACKENDS = ("schur", "gtsam", "scipy")
 BA_MIN_POINTS = 10  # a local BA needs this many points seen by two keyframes of the window
 
 
 @dataclass(frozen=True, slots=True)
 class MapperConfig:
     """Local BA over the last ``ba_window`` keyframes plus ``ba_fixed`` held ones (gauge);
-    ``ba_backend``: "gtsam" (LM, SEQUENTIAL_CHOLESKY; bench_ba_solvers) or "scipy" (least_squares,
-    converges more slowly: bench_vo)."""
+    ``ba_backend``: "gtsam" (LM, SEQUENTIAL_CHOLESKY; bench_ba_solvers), "schur" (the same LM in
+    NumPy on the reduced camera system, ``estimator.ba_schur``; about half the time, bench_speed)
+    or "scipy" (least_squares, converges more slowly: bench_vo)."""
 
     ba_window: int = 8
     ba_fixed: int = 2
@@ -169,7 +171,8 @@ class Mapper:
                         _rms(out.initial_residual_px), _rms(out.residual_px), len(bad_pts))
 
     def _solve(self, prob: BAProblem) -> BAResult | None:
-        solver = solve_ba_scipy if self.cfg.ba_backend == "scipy" else solve_ba_gtsam
+        solver = {"schur": solve_ba_schur, "gtsam": solve_ba_gtsam,
+                  "scipy": solve_ba_scipy}[self.cfg.ba_backend]
         try:
             return solver(prob, self.cfg.ba_iterations)
         except (RuntimeError, np.linalg.LinAlgError) as err:  # gtsam: indeterminant system

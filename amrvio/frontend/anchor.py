@@ -33,11 +33,14 @@ class AnchorImage:
 @dataclass(frozen=True, slots=True)
 class AnchorConfig:
     """LK window (px), largest accepted disagreement with the frame-to-frame track (px),
-    and whether to compensate the brightness change first."""
+    whether to compensate the brightness change first, and the pyramid levels of the LK (the
+    frame-to-frame track starts it within ``max_shift_px`` of the answer, well inside one
+    window at full resolution; each level costs a window per point)."""
 
     win_size: int = 21
     max_shift_px: float = 2.0
     photometric: bool = True
+    pyr_levels: int = 1
 
 
 def retrack_from_anchors(img: U8, pts: F64, first_kf: I64, first_uv: F64,
@@ -78,7 +81,8 @@ def retrack_from_anchors(img: U8, pts: F64, first_kf: I64, first_uv: F64,
         off = lo.astype(np.float64)
         p0 = (first_uv[sel] - off).astype(np.float32).reshape(-1, 1, 2)
         p1 = (pts[sel] - off).astype(np.float32).reshape(-1, 1, 2).copy()
-        p1, st, _ = cv2.calcOpticalFlowPyrLK(ref_c, img_c, p0, p1, winSize=win, maxLevel=1,
+        p1, st, _ = cv2.calcOpticalFlowPyrLK(ref_c, img_c, p0, p1, winSize=win,
+                                             maxLevel=config.pyr_levels,
                                              criteria=crit, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
         p1 = p1.reshape(-1, 2).astype(np.float64) + off
         shift = np.linalg.norm(p1 - pts[sel], axis=1)

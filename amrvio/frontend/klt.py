@@ -33,7 +33,9 @@ class KltConfig:
     half of it). ``wide_pyr_levels``: pyramid depth after blur or a gap. ``photometric``: affine
     brightness compensation (else none). ``ransac_thresh_px``: essential-matrix outlier gate.
     ``max_width_px``: wider images (HD video) are tracked on the first pyramid level narrower
-    than this, positions staying in full-resolution pixels (None: full resolution)."""
+    than this, positions staying in full-resolution pixels (None: full resolution).
+    ``fb_pyr_levels``: pyramid levels of the forward-backward check's backward pass (None: as
+    the forward pass)."""
 
     detector: DetectorConfig = field(default_factory=_vo_detector)
     win_size: int = 21
@@ -44,6 +46,8 @@ class KltConfig:
     ransac_thresh_px: float = 1.0
     max_iterations: int = 30  # 15 measured: KITTI alike, sim corridor 0.13 -> 0.75 % ATE
     max_width_px: int | None = 1280
+    # 0 (full resolution only) costs a quarter, but lets occluded points through (tests)
+    fb_pyr_levels: int | None = None
 
     @property
     def max_features(self) -> int:
@@ -57,7 +61,7 @@ class KltConfig:
             max_iterations=self.max_iterations, epsilon=0.01, fb_thresh_px=self.fb_thresh_px,
             max_error=None, border_px=self.detector.border_px * 0.5,
             epipolar=EpipolarConfig(thresh_px=self.ransac_thresh_px, seed=seed),
-            max_width_px=self.max_width_px,
+            max_width_px=self.max_width_px, fb_pyr_levels=self.fb_pyr_levels,
         )
 
 

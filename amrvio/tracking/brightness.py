@@ -53,14 +53,32 @@ class AffineBrightness:
         # a 256-entry lookup table: the same float32 arithmetic per grey level, once
         lut = np.arange(256, dtype=np.float32) * np.float32(self.a) + np.float32(self.b)
         table = np.clip(lut + np.float32(0.5), 0, 255).astype(np.uint8)
-        return np.asarray(table[img], dtype=np.uint8)
+        # cv2.LUT gives table[img] at a fraction of NumPy's fancy-indexing cost
+        return np.asarray(cv2.LUT(np.ascontiguousarray(img, dtype=np.uint8), table),
+                          dtype=np.uint8)
 
 
 def image_quantiles(img: U8, stride: int = 4) -> NDArray[np.float64]:
     """The 5, 10, ..., 95 % intensity quantiles (19,) of a subsampled grey image."""
     if img.ndim != 2:
         raise ShapeError(f"expected an (H, W) grey image, got shape {img.shape}")
-    return np.asarray(np.percentile(img[::stride, ::stride], QUANTILES), dtype=np.float64)
+    sub = img[::stride, ::stride]
+    if sub.dtype != np.uint8 or sub.size == 0:
+        return np.asarray(np.percentile(sub, QUANTILES), dtype=np.float64)
+    # np.percentile's linear rule, read off the 256-bin histogram instead of a sort (the
+    # same arithmetic, so the same values; a hundredth of the cost)
+    n = sub.size
+    q = np.true_divide(QUANTILES, 100)
+    virtual = (n - 1) * q
+    below = np.floor(virtual)
+    gamma = virtual - below
+    lo = np.clip(below, 0, n - 1).astype(np.int64)
+    hi = np.clip(below + 1, 0, n - 1).astype(np.int64)
+    cdf = np.cumsum(np.bincount(sub.ravel(), minlength=256))
+    a = np.searchsorted(cdf, lo, side="right").astype(np.float64)
+    b = np.searchsorted(cdf, hi, side="right").astype(np.float64)
+    d = b - a
+    return np.where(gamma >= 0.5, b - d * (1.0 - gamma), a + d * gamma)
 
 
 def fit_affine_quantiles(img_ref: U8, img_cur: U8, *, stride: int = 4) -> AffineBrightness:

@@ -20,7 +20,8 @@ from amrvio.errors import ShapeError
 from amrvio.tracking.brightness import (
     AffineBrightness,
     Invariance,
-    fit_affine_quantiles,
+    affine_from_quantiles,
+    image_quantiles,
     normalise_for_tracking,
 )
 
@@ -50,7 +51,9 @@ class LkConfig:
     backward pass). ``max_error``: bound on LK's mean absolute patch residual (None: none).
     ``border_px``: tracks ending closer to the edge are dropped (``border <= x < w - border``).
     ``epipolar``: None for no epipolar check. ``max_width_px``: wider images are tracked on the
-    first pyramid level narrower than it (None: full resolution).
+    first pyramid level narrower than it (None: full resolution). ``fb_pyr_levels``: pyramid
+    levels of the backward pass (None: ``pyr_levels``); it starts where the point came from, so
+    a consistent track needs no coarse level, and each level costs a full window per point.
     """
 
     invariance: Invariance = Invariance.AFFINE
@@ -63,6 +66,7 @@ class LkConfig:
     border_px: float = 4.0
     epipolar: EpipolarConfig | None = field(default_factory=EpipolarConfig)
     max_width_px: int | None = None
+    fb_pyr_levels: int | None = None
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -94,10 +98,24 @@ class TrackResult:
 
 
 class LkTracker:
-    """Tracks points from one image to another. No state between calls apart from the config."""
+    """Tracks points from one image to another. No state between calls apart from the config
+    and a memo of the intensity quantiles of the last images seen (a streaming caller passes
+    each image twice: as the current one, then as the previous one)."""
 
     def __init__(self, config: LkConfig | None = None) -> None:
         self.config = config or LkConfig()
+        self._quantiles: list[tuple[U8, bytes, F64]] = []
+
+    def _image_quantiles(self, img: U8) -> F64:
+        """``image_quantiles(img)``, reused for the same array object with the same sampled
+        pixels (a caller that refills one buffer gets fresh quantiles)."""
+        probe = img[::7, ::11].tobytes()
+        for seen, seen_probe, q in self._quantiles:
+            if seen is img and seen_probe == probe:
+                return q
+        q = image_quantiles(img)
+        self._quantiles = [*self._quantiles[-1:], (img, probe, q)]
+        return q
 
     def prepare(self, image: U8) -> TrackImage:
         """Prepare an (H, W) uint8 image once (a streaming caller keeps the previous one)."""
@@ -140,7 +158,8 @@ class LkTracker:
         bright = AffineBrightness()
         ref = a.lk
         if cfg.invariance is Invariance.AFFINE:
-            bright = fit_affine_quantiles(a.raw, b.raw)
+            bright = affine_from_quantiles(self._image_quantiles(a.raw),
+                                           self._image_quantiles(b.raw))
             ref = a.lk if bright.is_identity() else bright.apply(a.lk)
         s = a.scale
         win = (cfg.win_size, cfg.win_size)
@@ -165,8 +184,9 @@ class LkTracker:
         ok &= np.isfinite(p1f).all(axis=1)
         n_fb = 0
         if cfg.fb_thresh_px is not None:
+            fb_levels = cfg.pyr_levels if cfg.fb_pyr_levels is None else cfg.fb_pyr_levels
             pb, stb, _ = cv2.calcOpticalFlowPyrLK(b.lk, ref, p1, p0.copy(), winSize=win,
-                                                  maxLevel=cfg.pyr_levels, criteria=crit,
+                                                  maxLevel=fb_levels, criteria=crit,
                                                   flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
             ok &= stb.ravel() == 1
             fb = np.linalg.norm(_from_lk(pb.reshape(-1, 2), s) - p_prev, axis=1)

@@ -1,0 +1,467 @@
+"""Real-time throughput of the monocular VO (issue 11): a per-stage time budget on one core.
+
+Each run is ``amrvio run`` without the evaluation and the HTML report: one thread for OpenCV and
+BLAS (:func:`amrvio.pipeline.threads.limit_native_threads`, as the CLI does), the diagnostics
+on, images decoded from disk inside the timed loop, the output folder written as the run goes
+(:class:`amrvio.pipeline.run_output.RunWriter`) and finished at the end.
+
+Clocks: the machine is shared, so every figure is CPU time, not wall time. Frames/s is frames
+over the process CPU time (``time.process_time``: every thread; on one core that is what bounds
+the rate) of the whole loop (decode .. outputs). The stages are the pipeline's own stage timers
+run on the calling thread's CPU clock (``time.perf_counter`` is pointed at ``time.thread_time``
+during the run), plus the decode and output time measured here. Medians of 3 runs (1 in
+``--quick``). Accuracy: Sim3 ATE as a share of the path, of the online (causal) poses, those each
+frame had when it was processed, and of the refined ones, after the run.
+
+Sequences: KITTI 00 frames 0-199 (1241x376, ../shared/data) and a simulated 752x480 corridor with
+two blur bursts and three EV steps (``amrvio simulate``). Also written: a cProfile summary of one
+KITTI run (bench/results/speed_profile.txt), the local BA's two solvers on the BA problems of
+that run, whether GTSAM's optimize() holds the GIL, settings that make a stage cheaper (measured,
+not adopted), and the peak memory of runs over simulated driving of increasing length (0.5, 1, 2
+minutes at 320x240 and 5 fps: longer runs take too long on the 2 shared cores), each in its own
+process.
+
+Run alone: ``.venv/bin/python -m bench.bench_speed [--quick]``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import cProfile
+import dataclasses
+import io
+import json
+import pstats
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amrvio.config import PipelineConfig
+from amrvio.estimator.local_ba import BAProblem, BAResult
+from amrvio.eval.evaluate import evaluate
+from amrvio.io.base import Dataset
+from amrvio.io.dataset import open_dataset
+from amrvio.pipeline.diagnose import setup_diagnostics
+from amrvio.pipeline.pipeline import PipelineOutput
+from amrvio.pipeline.records import FrameRecord, PoseStatus
+from amrvio.pipeline.run import run_pipeline
+from amrvio.pipeline.run_output import RunWriter
+from amrvio.pipeline.threads import limit_native_threads
+from amrvio.types.trajectory import Trajectory
+
+ROOT = Path(__file__).resolve().parents[1]
+KITTI = ROOT / ".." / "shared" / "data" / "kitti00_0000-0199"
+PROFILE_TXT = ROOT / "bench" / "results" / "speed_profile.txt"
+Row = dict[str, object]
+U8 = NDArray[np.uint8]
+_WALL = time.perf_counter  # the wall clock, kept before the stage timers are pointed elsewhere
+
+# issue 11's stages -> the pipeline's timer names
+STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("decode", ("decode",)),
+    ("diagnostics", ("diagnostics", "blur", "undistort")),
+    ("KLT", ("klt", "predict", "direct")),
+    ("PnP", ("pnp",)),
+    ("keyframe work", ("anchor", "detect", "triangulate", "cull", "reloc_db", "scale")),
+    ("local BA", ("ba",)),
+    ("init + relocalisation", ("init", "reloc")),
+    ("outputs", ("outputs",)),
+)
+
+
+@dataclasses.dataclass(frozen=True, slots=True)
+class RunFigures:
+    """One timed run: frames, process CPU and wall seconds of the loop, CPU seconds per timer
+    name, Sim3 ATE (% of the path) of the online and the refined poses, keyframes."""
+
+    n_frames: int
+    cpu_s: float
+    wall_s: float
+    timers_s: dict[str, float]
+    ate_online_pct: float
+    ate_refined_pct: float
+    n_keyframes: int
+
+
+@contextlib.contextmanager
+def _thread_cpu_timers() -> Iterator[None]:
+    """The pipeline's stage timers read this thread's CPU clock while inside."""
+    setattr(time, "perf_counter", time.thread_time)  # noqa: B010
+    try:
+        yield
+    finally:
+        setattr(time, "perf_counter", _WALL)  # noqa: B010
+
+
+def _timed_frames(ds: Dataset, acc: dict[str, float]) -> Dataset:
+    """``ds`` whose images are decoded from disk on load, the CPU time added to acc["decode"]."""
+
+    def loader(load: Callable[[], U8]) -> Callable[[], U8]:
+        def timed() -> U8:
+            t0 = time.thread_time()
+            try:
+                return load()
+            finally:
+                acc["decode"] = acc.get("decode", 0.0) + time.thread_time() - t0
+        return timed
+
+    return dataclasses.replace(ds, frames=tuple(
+        dataclasses.replace(f, loader=loader(f.load)) for f in ds.frames))
+
+
+class _TimedSink:
+    """RunWriter as `amrvio run` uses it, its CPU time added to acc["outputs"]."""
+
+    def __init__(self, writer: RunWriter, acc: dict[str, float]) -> None:
+        self.writer, self.acc = writer, acc
+
+    def record(self, rec: FrameRecord) -> None:
+        t0 = time.thread_time()
+        self.writer.record(rec)
+        self.acc["outputs"] = self.acc.get("outputs", 0.0) + time.thread_time() - t0
+
+    def skip(self, skipped: object) -> None:
+        raise RuntimeError(f"bench_speed: a frame was skipped: {skipped}")
+
+
+def _ate_pct(stamps_s: NDArray[np.float64], T_world_cam: NDArray[np.float64],
+             gt: Trajectory) -> float:
+    ok = np.all(np.isfinite(T_world_cam.reshape(len(T_world_cam), -1)), axis=1)
+    r = evaluate(Trajectory.from_matrices(stamps_s[ok], T_world_cam[ok]), gt, align="sim3")
+    return 100.0 * r.ate.rmse / r.path_length_m
+
+
+def accuracy(out: PipelineOutput, online_status: list[PoseStatus],
+             gt: Trajectory) -> tuple[float, float]:
+    """Sim3 ATE (% of the path) of the online poses (frames not LOST when processed) and of
+    the refined trajectory."""
+    stamps = out.stamps_ns.astype(np.float64) * 1e-9
+    on = [i for i, r in enumerate(out.records)
+          if r.pose_online is not None and online_status[i] is not PoseStatus.LOST]
+    T_on = np.stack([out.records[i].pose_online.matrix() for i in on])  # type: ignore[union-attr]
+    fin = np.array([r.status is not PoseStatus.LOST for r in out.records])
+    return (_ate_pct(stamps[on], T_on, gt),
+            _ate_pct(stamps[fin], out.T_world_cam[fin], gt))
+
+
+def timed_run(ds: Dataset, gt: Trajectory, cfg: PipelineConfig | None = None) -> RunFigures:
+    """One run of ``ds`` as `amrvio run` does it, timed per stage (CPU)."""
+    cfg = cfg or PipelineConfig()
+    acc: dict[str, float] = {}
+    ds = _timed_frames(ds, acc)
+    setup = setup_diagnostics(ds, cfg.diagnostics) if cfg.diagnose else None
+    with tempfile.TemporaryDirectory() as td, _thread_cpu_timers():
+        writer = RunWriter(Path(td), cfg, setup.notes if setup else (), len(ds.frames))
+        writer.begin()
+        c0, w0 = time.process_time(), _WALL()
+        out = run_pipeline(ds, cfg, diagnostics=setup, sink=_TimedSink(writer, acc))
+        t0 = time.thread_time()
+        writer.finish(out, interrupted=False)
+        acc["outputs"] = acc.get("outputs", 0.0) + time.thread_time() - t0
+        cpu, wall = time.process_time() - c0, _WALL() - w0
+    timers = dict(acc)
+    for k, v in out.timings_s.items():
+        timers[k] = timers.get(k, 0.0) + v
+    online, refined = accuracy(out, writer.online_status, gt)
+    return RunFigures(len(out.records), cpu, wall, timers, online, refined,
+                      len(out.keyframe_indices))
+
+
+def stage_table(runs: list[RunFigures]) -> list[tuple[str, float]]:
+    """(stage, median ms/frame) for the issue's stages, then "other" (the rest of the loop)."""
+    n = runs[0].n_frames
+    out = []
+    named = {k for _, keys in STAGES for k in keys}
+    for stage, keys in STAGES:
+        out.append((stage, statistics.median(
+            1e3 * sum(r.timers_s.get(k, 0.0) for k in keys) / n for r in runs)))
+    out.append(("other (untimed pipeline code)", statistics.median(
+        1e3 * (r.cpu_s - sum(v for k, v in r.timers_s.items() if k in named)) / n for r in runs)))
+    extra = sorted({k for r in runs for k in r.timers_s} - named)
+    if extra:
+        raise RuntimeError(f"bench_speed: timers without a stage: {extra}")
+    return out
+
+
+def measure(tag: str, ds: Dataset, gt: Trajectory, repeats: int, target_fps: float,
+            target_ate_pct: float | None) -> list[Row]:
+    runs = [timed_run(ds, gt) for _ in range(repeats)]
+    n = runs[0].n_frames
+    cpu = statistics.median(r.cpu_s for r in runs)
+    wall = statistics.median(r.wall_s for r in runs)
+    fps = n / cpu
+    on = statistics.median(r.ate_online_pct for r in runs)
+    ref = statistics.median(r.ate_refined_pct for r in runs)
+    acc = f"Sim3 ATE {ref:.3f} % refined, {on:.3f} % online (causal)"
+    rows: list[Row] = [{
+        "name": f"speed {tag} mono VO throughput", "value": fps, "unit": "frames/s",
+        "target": f">= {target_fps:g} frames/s on one core", "pass": fps >= target_fps,
+        "note": f"{n} frames, median of {repeats}, CPU time (process); wall {n / wall:.1f} "
+                f"frames/s (shared machine); {acc}; "
+                f"{statistics.median(r.n_keyframes for r in runs):.0f} keyframes"}]
+    if target_ate_pct is not None:
+        rows.append({"name": f"speed {tag} Sim3 ATE / path (refined)", "value": ref, "unit": "%",
+                     "target": f"<= {target_ate_pct:g} %", "pass": ref <= target_ate_pct,
+                     "note": f"same runs; online (causal) poses: {on:.3f} %"})
+    else:
+        rows.append({"name": f"speed {tag} Sim3 ATE / path (refined)", "value": ref, "unit": "%",
+                     "note": "same runs"})
+    rows.append({"name": f"speed {tag} Sim3 ATE / path (online, causal)", "value": on,
+                 "unit": "%", "note": "the pose each frame had when it was processed"})
+    for stage, ms in stage_table(runs):
+        rows.append({"name": f"speed {tag} stage {stage}", "value": ms, "unit": "ms/frame",
+                     "note": f"CPU, median of {repeats}; {100 * ms * n / 1e3 / cpu:.0f} % of "
+                             "the loop"})
+    return rows
+
+
+def _kitti() -> tuple[Dataset, Trajectory] | None:
+    if not KITTI.is_dir():
+        return None
+    ds = open_dataset(f"kitti:{KITTI}")
+    if ds.groundtruth is None:
+        raise RuntimeError(f"{KITTI} has no poses.txt")
+    return ds, ds.groundtruth
+
+
+def sim_corridor(out: Path, seconds: float, width: int = 752, height: int = 480,
+                 fps: float = 20.0, bursts: bool = True) -> Path:
+    """The 752x480 corridor (forward-stop-turn) with 3 EV steps and 2 blur bursts."""
+    from amrvio.sim.simulate import SimConfig, simulate
+
+    t = seconds
+    cfg = SimConfig(scene="corridor", motion="forward-stop-turn", seconds=t, fps=fps,
+                    width=width, height=height,
+                    ev_steps=f"{0.2 * t:.2f}:+1,{0.45 * t:.2f}:-1.5,{0.7 * t:.2f}:+1",
+                    blur_bursts=(f"{0.3 * t:.2f}:0.5:3,{0.6 * t:.2f}:0.5:3" if bursts else ""))
+    simulate(cfg, out)
+    return out
+
+
+def _sim_gt(ds: Dataset) -> Trajectory:
+    if ds.groundtruth is None or ds.T_body_cam is None:
+        raise RuntimeError("the simulator wrote no ground truth")
+    return ds.groundtruth.right_multiplied(ds.T_body_cam)
+
+
+@contextlib.contextmanager
+def _recording_ba(into: list[BAProblem]) -> Iterator[None]:
+    """The local BA problems the mapper solves (GTSAM back-end) are appended to ``into``."""
+    from amrvio.estimator import mapper
+
+    saved = mapper.solve_ba_gtsam
+
+    def record(prob: BAProblem, max_iterations: int = 10) -> BAResult:
+        into.append(prob)
+        return saved(prob, max_iterations)
+
+    setattr(mapper, "solve_ba_gtsam", record)  # noqa: B010
+    try:
+        yield
+    finally:
+        setattr(mapper, "solve_ba_gtsam", saved)  # noqa: B010
+
+
+def write_profile(ds: Dataset, gt: Trajectory, path: Path) -> list[BAProblem]:
+    """cProfile of one KITTI run: top 25 by cumulative and by own time. Returns the local BA
+    problems of the run."""
+    problems: list[BAProblem] = []
+    prof = cProfile.Profile(time.process_time)  # CPU time: the machine is shared
+    with _recording_ba(problems):
+        prof.enable()
+        timed_run(ds, gt)
+        prof.disable()
+    buf = io.StringIO()
+    buf.write("# cProfile (process CPU time) of one `amrvio run`-like pass over KITTI 00 frames "
+              "0-199 (one thread; bench/bench_speed.py; cProfile inflates Python-heavy code)\n\n")
+    for key in ("cumulative", "tottime"):
+        buf.write(f"## top 25 by {key}\n")
+        st = pstats.Stats(prof, stream=buf)
+        st.strip_dirs().sort_stats(key).print_stats(25)
+    path.write_text(buf.getvalue(), encoding="utf-8")
+    return problems
+
+
+def ba_solver_rows(problems: list[BAProblem], iterations: int) -> list[Row]:
+    """GTSAM vs the NumPy Schur LM on the same local BA problems (CPU time per problem, final
+    cost, keyframe positions)."""
+    from amrvio.estimator.ba_schur import huber_cost, solve_ba_schur
+    from amrvio.estimator.local_ba import solve_ba_gtsam
+
+    t_g, t_s, dpos, dcost = [], [], [], []
+    for prob in problems:
+        t0 = time.thread_time()
+        g = solve_ba_gtsam(prob, iterations)
+        t_g.append(time.thread_time() - t0)
+        t0 = time.thread_time()
+        sc = solve_ba_schur(prob, iterations)
+        t_s.append(time.thread_time() - t0)
+        dpos.append(float(np.abs(g.T_cam_world[:, :3, 3] - sc.T_cam_world[:, :3, 3]).max()))
+        cg = huber_cost(g.residual_px, prob.huber_px)
+        dcost.append((huber_cost(sc.residual_px, prob.huber_px) - cg) / cg)
+    sizes = (f"{len(problems)} local BAs of one KITTI 00 0-199 run, median "
+             f"{np.median([len(p.points) for p in problems]):.0f} points, "
+             f"{np.median([len(p.obs_cam) for p in problems]):.0f} observations, "
+             f"{iterations} iterations max")
+    return [
+        {"name": "speed local BA gtsam LM per keyframe", "value": 1e3 * statistics.median(t_g),
+         "unit": "ms", "note": f"CPU, median; {sizes}"},
+        {"name": "speed local BA NumPy Schur LM per keyframe", "value":
+            1e3 * statistics.median(t_s), "unit": "ms",
+         "note": f"same problems; final cost vs gtsam: median {np.median(dcost):+.1e}, max "
+                 f"{max(dcost):+.1e} (relative); keyframe positions differ by "
+                 f"{np.median(dpos):.1e} (median), {max(dpos):.1e} (max) map units"},
+    ]
+
+
+def gil_row(problem: BAProblem) -> Row:
+    """Whether GTSAM's optimize() lets another Python thread run: the rate of a Python loop on
+    the main thread while optimize() runs in a worker, against its rate alone."""
+    import threading
+    from importlib import metadata
+
+    from amrvio.estimator import local_ba
+
+    def spin(seconds: float) -> float:
+        n, t0 = 0, _WALL()
+        while _WALL() - t0 < seconds:
+            n += 1
+        return n / seconds
+
+    alone = spin(0.5)
+    done = threading.Event()
+    span: list[float] = []
+
+    def work() -> None:
+        t0 = _WALL()
+        for _ in range(3):
+            local_ba.solve_ba_gtsam(problem, 8)
+        span.append(_WALL() - t0)
+        done.set()
+
+    worker = threading.Thread(target=work)
+    n, t0 = 0, _WALL()
+    worker.start()
+    while not done.is_set():
+        n += 1
+    rate = n / (_WALL() - t0)
+    worker.join()
+    return {"name": "speed GIL: Python progress while gtsam BA runs in a thread",
+            "value": 100.0 * rate / alone, "unit": "%",
+            "note": f"gtsam {metadata.version('gtsam')}; main-thread loop rate during 3 local BAs in a "
+                    f"worker ({1e3 * span[0]:.0f} ms) vs alone; the wrapper holds the GIL in "
+                    "optimize() when this is far below 100 %, so a BA thread cannot overlap "
+                    "the tracker (and on one core it could not add throughput anyway)"}
+
+# ------------------------------------------------------------------ peak memory
+_MEM_CHILD = """
+import json, os, resource, sys
+from amrvio.io.dataset import open_dataset
+from amrvio.pipeline.run import run_pipeline
+from amrvio.pipeline.threads import limit_native_threads
+def rss_mb():
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+limit_native_threads(1)
+ds = open_dataset(sys.argv[1])
+before = rss_mb()
+out = run_pipeline(ds)
+print(json.dumps({"frames": len(out.records), "keyframes": len(out.keyframe_indices),
+                  "rss_before_mb": before, "rss_after_mb": rss_mb(),
+                  "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+"""
+
+
+def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float) -> list[Row]:
+    """Peak memory (ru_maxrss) of the VO over simulated driving of each length, each run in
+    its own process; the last row is the growth per minute between the shortest and the
+    longest run."""
+    rows: list[Row] = []
+    peaks: list[float] = []
+    with tempfile.TemporaryDirectory() as td:
+        for mins in minutes:
+            seq = sim_corridor(Path(td) / f"m{mins:g}", 60.0 * mins, width, height, fps,
+                               bursts=False)
+            res = subprocess.run([sys.executable, "-c", _MEM_CHILD, str(seq)], check=True,
+                                 capture_output=True, text=True, cwd=ROOT)
+            fig = json.loads(res.stdout.strip().splitlines()[-1])
+            grown = float(fig["rss_after_mb"]) - float(fig["rss_before_mb"])
+            peaks.append(grown)
+            rows.append({"name": f"speed memory {mins:g} min driving, RSS growth over the run",
+                         "value": grown, "unit": "MiB",
+                         "note": f"{fig['frames']} frames, {fig['keyframes']} keyframes, corridor "
+                                 f"{width}x{height} at {fps:g} fps, own process; resident set "
+                                 f"{fig['rss_before_mb']:.0f} MiB before the run (libraries "
+                                 f"loaded), {fig['rss_after_mb']:.0f} MiB after; peak (ru_maxrss) "
+                                 f"{fig['maxrss_mb']:.0f} MiB"})
+    if len(minutes) > 1:
+        slope = (peaks[-1] - peaks[0]) / (minutes[-1] - minutes[0])
+        rows.append({"name": "speed memory growth per minute of driving", "value": slope,
+                     "unit": "MiB/min",
+                     "note": f"RSS growth between the {minutes[0]:g} and {minutes[-1]:g} min runs; "
+                             "the maps, frame records and relocalisation keyframes are kept for "
+                             "the whole run"})
+    return rows
+
+
+# settings that cut a stage's cost, measured against the default and not adopted (see note)
+ALTERNATIVES: tuple[tuple[str, dict[str, object]], ...] = (
+    ("ba_backend=schur", {"mapping": {"mapper": {"ba_backend": "schur"}}}),
+    ("fb_pyr_levels=0", {"tracking": {"klt": {"fb_pyr_levels": 0}}}),
+    ("anchor.pyr_levels=0", {"mapping": {"anchor": {"pyr_levels": 0}}}),
+)
+
+
+def alternative_rows(tag: str, ds: Dataset, gt: Trajectory) -> list[Row]:
+    """One run per alternative setting: throughput and refined ATE next to the default's."""
+    from amrvio.config import config_from_dict
+
+    rows: list[Row] = []
+    for name, over in ALTERNATIVES:
+        r = timed_run(ds, gt, config_from_dict(over, "bench_speed"))
+        rows.append({"name": f"speed {tag} [{name}] mono VO throughput",
+                     "value": r.n_frames / r.cpu_s, "unit": "frames/s",
+                     "note": f"1 run; Sim3 ATE {r.ate_refined_pct:.3f} % refined, "
+                             f"{r.ate_online_pct:.3f} % online; not the default"})
+    return rows
+
+
+def run(quick: bool) -> list[Row]:
+    limit_native_threads(1)  # as `amrvio run` does
+    repeats = 1 if quick else 3
+    rows: list[Row] = []
+    kitti = _kitti()
+    if kitti is None:
+        rows.append({"name": "speed kitti00 skipped", "value": float("nan"), "unit": "",
+                     "note": f"{KITTI} absent"})
+    else:
+        ds, gt = kitti
+        tag = "kitti00 0-199 1241x376"
+        rows += measure(tag, ds, gt, repeats, 34.0, 0.65)
+        problems = write_profile(ds, gt, PROFILE_TXT)
+        rows += ba_solver_rows(problems[:: 4 if quick else 1], 8)
+        rows.append(gil_row(problems[len(problems) // 2]))
+        if not quick:
+            rows += alternative_rows(tag, ds, gt)
+    with tempfile.TemporaryDirectory() as td:
+        seq = sim_corridor(Path(td) / "corridor", 10.0)
+        ds = open_dataset(str(seq))
+        tag = "sim corridor 752x480 blur+EV"
+        rows += measure(tag, ds, _sim_gt(ds), repeats, 60.0, None)
+        if not quick:
+            rows += alternative_rows(tag, ds, _sim_gt(ds))
+    rows += memory_rows((0.25, 0.5) if quick else (0.5, 1.0, 2.0), 320, 240, 5.0)
+    return rows
+
+
+if __name__ == "__main__":
+    for r in run("--quick" in sys.argv):
+        print(f"{r['name']:<62} {float(r['value']):>10.3f} {r['unit']:<9} {r['note']}",  # type: ignore[arg-type]
+              flush=True)
