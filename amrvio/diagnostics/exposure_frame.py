@@ -32,12 +32,12 @@ class ExposureFrame:
     box mean and its clip flag at any pixel cost four look-ups each, so that only the patches
     around tracked points are ever filtered: ``integral`` (H+1, W+1) of the intensity
     (linearised first when an inverse response is given) and ``clip_integral`` (H+1, W+1) of the
-    raw pixels that are saturated (>= 250) or under-exposed (<= 5). ``box``: the side of the
+    raw pixels that are saturated (>= 250) or under-exposed (<= 5), None when none is. ``box``: the side of the
     smoothing box; ``linear``: linearised through an inverse response; ``clip_levels``: the raw
     clip levels in the units of the intensity."""
 
     integral: NDArray[np.float64]
-    clip_integral: NDArray[np.int32]
+    clip_integral: NDArray[np.int32] | None
     box: int
     linear: bool = False
     clip_levels: tuple[float, float] = (UNDEREXPOSED_DN, SATURATED_DN)
@@ -60,21 +60,28 @@ class ExposureFrame:
         i00 = (np.where(inside, v0 * row + u0, 0)[:, None]
                + _grid_offsets(side, row)[None, :])
         i01, i10, i11 = i00 + k, i00 + k * row, i00 + k * row + k
-        f, c = self.integral.reshape(-1), self.clip_integral.reshape(-1)
+        f = self.integral.reshape(-1)
         # int32 integrals: every partial difference is a sum over part of the image (no overflow)
         sums = f.take(i11) - f.take(i01) - f.take(i10) + f.take(i00)
-        clipped = (c.take(i11) - c.take(i01) - c.take(i10) + c.take(i00)) > 0
         mean = np.asarray(sums, np.float64) * (1.0 / (k * k))
-        return mean, clipped | ~inside[:, None]
+        outside = np.repeat(~inside[:, None], i00.shape[1], axis=1)
+        if self.clip_integral is None:  # nothing clips in this frame
+            return mean, outside
+        c = self.clip_integral.reshape(-1)
+        clipped = (c.take(i11) - c.take(i01) - c.take(i10) + c.take(i00)) > 0
+        return mean, clipped | outside
 
     @property
     def bad(self) -> NDArray[np.bool_]:
         """(H, W) True where the box touches a clipped raw pixel or reaches outside the image
         (for feature detection, which wants the whole frame; the fit looks up its samples)."""
         k, ci = self.box, self.clip_integral
-        counts = ci[k:, k:] - ci[:-k, k:] - ci[k:, :-k] + ci[:-k, :-k]  # boxes from their corner
         bad = np.ones(self.shape, dtype=bool)
         e = k // 2
+        if ci is None:
+            bad[e : e + self.shape[0] - k + 1, e : e + self.shape[1] - k + 1] = False
+            return bad
+        counts = ci[k:, k:] - ci[:-k, k:] - ci[k:, :-k] + ci[:-k, :-k]  # boxes from their corner
         bad[e : e + counts.shape[0], e : e + counts.shape[1]] = counts > 0
         return bad
 
@@ -99,9 +106,12 @@ def integral_frame(
     if img.dtype != np.uint8:
         img = np.clip(img, 0, 255).astype(np.uint8)
     inside = cv2.inRange(img, int(UNDEREXPOSED_DN) + 1, int(SATURATED_DN) - 1)
-    clipped = cv2.threshold(inside, 0, 1, cv2.THRESH_BINARY_INV)[1]
-    return ExposureFrame(integral, cv2.integral(clipped, sdepth=cv2.CV_32S), k,
-                         inverse_response is not None, clip_levels(inverse_response))
+    clip_integral = None  # a frame without a clipped pixel needs no second integral
+    if cv2.countNonZero(inside) < img.size:
+        clipped = cv2.threshold(inside, 0, 1, cv2.THRESH_BINARY_INV)[1]
+        clip_integral = cv2.integral(clipped, sdepth=cv2.CV_32S)
+    return ExposureFrame(integral, clip_integral, k, inverse_response is not None,
+                         clip_levels(inverse_response))
 
 
 def clip_levels(inverse_response: NDArray[np.floating] | None) -> tuple[float, float]:
