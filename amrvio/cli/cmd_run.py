@@ -58,6 +58,10 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
                              "alignment assume brightness constancy (ablation)")
     parser.add_argument("--no-blur-gating", action="store_true",
                         help="use blurred frames like sharp ones (ablation; config: blur_gating)")
+    parser.add_argument("--no-imu", action="store_true",
+                        help="ignore the recording's IMU: the monocular VO alone, up to scale "
+                             "(default: visual-inertial odometry whenever the recording has an IMU "
+                             "and a camera-IMU transform; config: vio.enabled)")
     parser.add_argument("--ba-backend", choices=("gtsam", "scipy"), default=None,
                         help="local bundle adjustment solver (default: gtsam, LM with "
                              "SEQUENTIAL_CHOLESKY; config: mapping.mapper.ba_backend)")
@@ -77,6 +81,8 @@ def build_config(args: argparse.Namespace) -> object:
         cfg = without_photometric(cfg)
     if args.no_blur_gating:
         cfg = dataclasses.replace(cfg, blur_gating=False)
+    if getattr(args, "no_imu", False):
+        cfg = dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, enabled=False))
     if args.camera_height is not None:
         cfg = dataclasses.replace(cfg, scale=dataclasses.replace(
             cfg.scale, camera_height_m=args.camera_height))
