@@ -42,7 +42,7 @@ class VioStageConfig:
     enabled: bool = True
     imu_noise_scale: float = 1.0
     window_keyframes: int = 10
-    static_init_s: float = 1.0
+    static_init_s: float = 0.4
     min_init_keyframes: int = 8
     max_init_window_s: float = 10.0
     min_tracks: int = 10
