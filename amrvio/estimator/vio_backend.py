@@ -258,6 +258,15 @@ class VioBackend:
             out.append((st, f.keyframe))
         return tuple(out)
 
+    def landmarks(self) -> tuple[NDArray[np.int64], F64]:
+        """The front-end ids (L,) and current world positions (L, 3) of the window's landmarks
+        (for a re-initialisation that keeps them)."""
+        if self._values is None or not self._tracks.active:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+        ids = np.array(sorted(self._tracks.active), dtype=np.int64)
+        X = np.array([self._landmark(self._tracks.active[int(i)].key) for i in ids])
+        return ids, X.reshape(-1, 3)
+
     # ------------------------------------------------------------------ helpers
 
     def _drop_state(self) -> None:

@@ -175,22 +175,26 @@ class VioStage:
             self.track.set(index, inp.t_ns, est.state.T_world_body, bridged=True)
             events.append("vio_bridged")
             return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
+        landmarks = self.backend.landmarks()
         res = self.backend.add_frame(inp.t_ns, imu, obs)
         est = res.estimate
         if not est.ok or est.state is None:
-            events.append(f"vio_failed:{est.status.value}")
-            self.vo_keyframes.clear()
             pred = res.predicted
-            if pred is not None:
-                self.track.set(index, inp.t_ns, pred.T_world_body, bridged=True)
-            return VioReport(VioPhase.BRIDGED if pred is not None else VioPhase.NO_IMU, est,
-                             last_init=self.last_init, init_kind=self.kind)
+            if pred is None:  # the IMU does not cover the frame: back to the VO until a new init
+                events.append(f"vio_failed:{est.status.value}")
+                self.vo_keyframes.clear()
+                return VioReport(VioPhase.NO_IMU, est, last_init=self.last_init, init_kind=self.kind)
+            # the solver failed: restart at the IMU prediction, with the landmarks it had
+            events.append(f"vio_reinit:{est.status.value}")
+            self.track.set(index, inp.t_ns, pred.T_world_body, bridged=True)
+            self._reinit(pred, obs, imu, landmarks)
+            return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
         self.track.set(index, inp.t_ns, est.state.T_world_body)
         self.track.update(self.backend.window())
         if res.checks is not None and not res.checks.ok and self.cfg.reinit_on_check_failure:
             events.append(f"vio_reinit:{'+'.join(c.value for c in res.checks.failed)}")
             base = res.predicted if res.predicted is not None else est.state
-            self._reinit(base, obs, imu)
+            self._reinit(base, obs, imu, landmarks)
         return VioReport(VioPhase.VIO, est, res.keyframe, last_init=self.last_init, checks=res.checks,
                          init_kind=self.kind)
 
@@ -316,11 +320,14 @@ class VioStage:
         events.append(f"vi_init_ok:scale={s:.5g}:std={st.scale_std:.3g}")
         return res
 
-    def _reinit(self, base: InertialState, obs: VisualObservations, imu: ImuData) -> None:
-        """Restart the smoother at ``base`` with loose priors; the tracks become new landmarks."""
+    def _reinit(self, base: InertialState, obs: VisualObservations, imu: ImuData,
+                landmarks: tuple[I64, F64]) -> None:
+        """Restart the smoother at ``base`` with loose priors, keeping the landmarks it had before
+        the failed update (they hold the scale) with a loose prior too."""
         sig = PriorSigmas(rotation_rad=0.02, position_m=0.02, velocity_m_s=0.2, gyro_bias_rad_s=0.01,
-                          accel_bias_m_s2=0.2)
-        self.backend.initialise(VioInitialState(base, sig), imu, obs)
+                          accel_bias_m_s2=0.2, landmark_m=0.1)
+        ids, X = landmarks
+        self.backend.initialise(VioInitialState(base, sig, ids, X), imu, obs)
         self.kind = "reinit"
 
 
