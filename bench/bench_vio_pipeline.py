@@ -9,7 +9,9 @@
   the causal metric scale stays within 2 % (scale of the VIO's online positions from the start to
   each frame against the ground truth, rotation about gravity aligned);
 - blur bursts (forward-stop-turn with two 0.5 s yaw oscillations of 20 and 30 px of smear): every
-  frame posed (IMU bridging), and the ATE against the same run rendered without blur.
+  frame posed (IMU bridging), and the ATE against the same run rendered without blur;
+- constant-velocity corridor: the IMU-only initialiser's statuses, and the scale error with the
+  wheel odometry (``--wheels``).
 
 Accuracy: ``eval.json`` of the run (SE3 and Sim3 alignment of the body poses); on a straight path,
 where Umeyama's rotation is undefined, the alignment about gravity (``yaw_aligned``).
@@ -146,8 +148,8 @@ def blur_bursts(work: Path) -> list[Row]:
     out: dict[bool, tuple[RunResult, float]] = {}
     for blur in (True, False):
         seq = work / f"burst_{'blur' if blur else 'sharp'}"
-        simulate(SimConfig(motion="forward-stop-turn", seconds=8.0, blur_bursts=bursts, blur=blur, width=W, height=H), seq,
-                 force=True)
+        simulate(SimConfig(motion="forward-stop-turn", seconds=8.0, blur_bursts=bursts, blur=blur, width=W,
+                           height=H), seq, force=True)
         out[blur] = _run(seq, work / f"{seq.name}_out")
 
     def ate(res: RunResult) -> float:
@@ -169,12 +171,46 @@ def blur_bursts(work: Path) -> list[Row]:
     ]
 
 
+def constant_velocity(work: Path) -> list[Row]:
+    """The corridor at constant velocity: the IMU alone cannot give the scale (the initialiser
+    must say so); with the wheels (``--wheels``) the scale is metric."""
+    import dataclasses
+
+    from amrvio.config import PipelineConfig
+
+    seq = work / "cv"
+    simulate(SimConfig(motion="constant-velocity", seconds=8.0, width=W, height=H), seq, force=True)
+    imu_only, secs_imu = _run(seq, work / "cv_imu")
+    statuses = sorted({r.estimator.vio.vi_init.status.value for r in imu_only.records
+                       if r.estimator.vio is not None and r.estimator.vio.vi_init is not None})
+    cfg = PipelineConfig()
+    cfg = dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, wheel_sigma_m_s=0.05))
+    t0 = time.perf_counter()
+    wheels = run_recording(str(seq), cfg, out=work / "cv_wheels", report=False, force=True)
+    secs = time.perf_counter() - t0
+    ev: dict[str, Any] = wheels.eval_summary or {}
+    ya = ev.get("yaw_aligned") or {}
+    scale = float(ya.get("scale_error_pct", float("nan")))
+    posed, n, _ = _posed(wheels)
+    wheel_init = [e[1] for e in wheels.summary["events"] if e[1].startswith("vi_init_wheel")]
+    note = (f"IMU-only initialiser statuses {statuses} ({secs_imu:.0f} s); with wheels: {posed}/{n} posed, "
+            f"yaw-aligned ATE {ya.get('ate_m', float('nan')):.4f} m, first wheel init "
+            f"{wheel_init[0] if wheel_init else 'none'}; the simulated wheels read 2 % long; {secs:.0f} s")
+    return [
+        {"name": "VIO sim constant-velocity 8 s: IMU initialiser reports insufficient_excitation",
+         "value": float("insufficient_excitation" in statuses), "unit": "", "note": note,
+         "target": "reported", "pass": "insufficient_excitation" in statuses and "ok" not in statuses},
+        {"name": "VIO sim constant-velocity 8 s with wheels: scale error", "value": scale, "unit": "%",
+         "note": note, "target": "<= 2 %", "pass": bool(scale <= 2.0)},
+    ]
+
+
 def run_rows(quick: bool) -> list[Row]:
     limit_native_threads(1)  # as `amrvio run` does
     rows: list[Row] = []
     with tempfile.TemporaryDirectory(prefix="amrvio_bench_vio_") as tmp:
         work = Path(tmp)
-        parts = [lambda: forward_stop_turn(work), lambda: blur_bursts(work)]
+        parts = [lambda: forward_stop_turn(work), lambda: blur_bursts(work), lambda: constant_velocity(work)]
         if DATA.is_dir():
             parts = [lambda: replay(work, quick), lambda: mh01(work), *parts]
         for part in parts:
@@ -196,7 +232,8 @@ if __name__ == "__main__":
         with tempfile.TemporaryDirectory(prefix="amrvio_bench_vio_") as tmp:
             w = Path(tmp)
             table = {"replay": lambda: replay(w, "--quick" in sys.argv), "mh01": lambda: mh01(w),
-                     "fst": lambda: forward_stop_turn(w), "blur": lambda: blur_bursts(w)}
+                     "fst": lambda: forward_stop_turn(w), "blur": lambda: blur_bursts(w),
+                     "cv": lambda: constant_velocity(w)}
             for name in only:
                 for r in table[name]():
                     print(r, flush=True)

@@ -62,6 +62,10 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ignore the recording's IMU: the monocular VO alone, up to scale "
                              "(default: visual-inertial odometry whenever the recording has an IMU "
                              "and a camera-IMU transform; config: vio.enabled)")
+    parser.add_argument("--wheels", action="store_true",
+                        help="a ground robot: use the recording's wheel odometry (forward speed, "
+                             "no sideways or vertical motion) in the VIO, which makes the scale "
+                             "metric even at constant velocity (config: vio.wheel_sigma_m_s)")
     parser.add_argument("--ba-backend", choices=("gtsam", "scipy"), default=None,
                         help="local bundle adjustment solver (default: gtsam, LM with "
                              "SEQUENTIAL_CHOLESKY; config: mapping.mapper.ba_backend)")
@@ -83,6 +87,8 @@ def build_config(args: argparse.Namespace) -> object:
         cfg = dataclasses.replace(cfg, blur_gating=False)
     if getattr(args, "no_imu", False):
         cfg = dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, enabled=False))
+    if getattr(args, "wheels", False) and cfg.vio.wheel_sigma_m_s <= 0:
+        cfg = dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, wheel_sigma_m_s=0.05))
     if args.camera_height is not None:
         cfg = dataclasses.replace(cfg, scale=dataclasses.replace(
             cfg.scale, camera_height_m=args.camera_height))

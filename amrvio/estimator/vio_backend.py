@@ -149,8 +149,12 @@ class VioBackend:
         p_sig, v_sig = world_position_velocity_sigma(state, cov)
         return VioEstimate(int(t_ns), kind, VioStatus.OK, state, p_sig, v_sig, since)
 
-    def add_frame(self, t_ns: int, imu: ImuData, observations: VisualObservations) -> FrameResult:
-        """Insert the frame at ``t_ns`` and update the window (see the module docstring)."""
+    def add_frame(self, t_ns: int, imu: ImuData, observations: VisualObservations,
+                  body_velocity: tuple[F64, float] | None = None) -> FrameResult:
+        """Insert the frame at ``t_ns`` and update the window (see the module docstring).
+        ``body_velocity``: a measured velocity of the body in its own frame (3,) m/s and its
+        standard deviation per axis (wheel odometry: forward speed, no sideways or vertical
+        motion); it becomes a prior on the world velocity through the IMU-predicted attitude."""
         import gtsam
 
         t0, t_ns, nobs = time.perf_counter(), int(t_ns), len(observations)
@@ -186,6 +190,10 @@ class VioBackend:
         values.insert(X, to_gtsam_pose(predicted.T_world_body))
         values.insert(V, np.asarray(predicted.v_world_m_s))
         values.insert(B, to_gtsam_bias(last.bias))
+        if body_velocity is not None:
+            v_body, v_sigma = body_velocity
+            v_world = predicted.T_world_body.R @ np.asarray(v_body, dtype=np.float64)
+            graph.add(gtsam.PriorFactorVector(V, v_world, gtsam.noiseModel.Isotropic.Sigma(3, float(v_sigma))))
         stamps: dict[int, float] = dict.fromkeys((X, V, B), float(ordinal))
         frame = WindowFrame(k, t_ns, ordinal, is_kf)
         removed: list[int] = []

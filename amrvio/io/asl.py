@@ -43,6 +43,7 @@ from amrvio.io.table import (
     seconds_column_ns,
 )
 from amrvio.io.trajectory import read_euroc_csv
+from amrvio.io.wheel import WHEEL_FILE, read_wheel_csv
 from amrvio.types.sensors import Frame
 from amrvio.types.trajectory import Trajectory
 
@@ -174,6 +175,7 @@ def read_asl(path: Path, kind: str = "euroc", calib: Path | None = None) -> Data
         [cam_dir, dso / "cam0", mav, base, *sorted(base.glob("photometric*"))]
     )
     inverse_response, vignette = read_photometric(pcalib_path, vignette_path, image_hw)
+    wheel_path = base / WHEEL_FILE
     return Dataset(
         kind=kind,
         root=path,
@@ -186,4 +188,5 @@ def read_asl(path: Path, kind: str = "euroc", calib: Path | None = None) -> Data
         groundtruth_frame="body" if groundtruth is not None else "",
         inverse_response=None if inverse_response is None else np.asarray(inverse_response),
         vignette=vignette,
+        wheel=read_wheel_csv(wheel_path) if wheel_path.is_file() else None,
     )

@@ -26,6 +26,7 @@ from amrvio.io.table import (
     int_column,
     read_table,
 )
+from amrvio.io.wheel import WheelData
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import SE3
 from amrvio.types.sensors import Frame, ImuData, ImuNoise, ImuSample
@@ -48,7 +49,8 @@ class Dataset:
     T_body_cam: camera pose in the body (IMU) frame, or None when unknown. groundtruth: poses as
     stored by the dataset (EuRoC/TUM-VI: ``T_world_body``, ``groundtruth_frame == "body"``; KITTI:
     ``T_cam0_camk``, ``"cam"``; ``""`` when there is none). inverse_response: (256,) G^-1 from
-    pcalib.txt; vignette: (H, W) in [0, 1] from vignette.png.
+    pcalib.txt; vignette: (H, W) in [0, 1] from vignette.png. wheel: wheel odometry of a ground
+    robot (:mod:`amrvio.io.wheel`), or None.
     """
 
     kind: str
@@ -62,6 +64,7 @@ class Dataset:
     groundtruth_frame: str = ""
     inverse_response: F64 | None = None
     vignette: F64 | None = None
+    wheel: WheelData | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:

@@ -76,7 +76,7 @@ class Pipeline:
         self.composer = TrajectoryComposer(K, RefineGates(
             cfg.output.final_refine, tracking.min_pnp_inliers, tracking.huber_px,
             tracking.pnp_thresh_px))
-        vio = VioStage(cfg.vio, K, imu.T_body_cam, imu.noise, self.mapping) \
+        vio = VioStage(cfg.vio, K, imu, self.mapping) \
             if imu is not None and cfg.vio.enabled and cfg.track else None
         self.sensors = SensorStages(diagnostics, vio)
         self.blur = BlurScorer(cfg.diagnostics.blur)

@@ -117,7 +117,7 @@ def imu_setup(dataset: Dataset, config: PipelineConfig) -> ImuSetup | None:
     ``config.vio.enabled`` (None: the VO alone). Without a noise file, the ADIS16448's."""
     if dataset.imu is None or len(dataset.imu) < 2 or dataset.T_body_cam is None or not config.vio.enabled:
         return None
-    return ImuSetup(dataset.imu_noise or ImuNoise.euroc_adis16448(), dataset.T_body_cam)
+    return ImuSetup(dataset.imu_noise or ImuNoise.euroc_adis16448(), dataset.T_body_cam, dataset.wheel)
 
 
 def diagnose(dataset: Dataset, config: PipelineConfig | None = None, *,

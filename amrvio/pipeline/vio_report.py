@@ -19,6 +19,7 @@ from amrvio.estimator.vio_types import VioEstimate
 from amrvio.frontend.tracker import TrackOutcome
 from amrvio.frontend.tracks import TrackSet
 from amrvio.imu.static_init import StaticInitResult
+from amrvio.io.wheel import WheelData
 from amrvio.types.lie import SE3
 from amrvio.types.sensors import ImuData, ImuNoise
 
@@ -37,7 +38,10 @@ class VioStageConfig:
     ``reinit_on_check_failure``: re-initialise when a consistency check fails;
     ``max_init_scale_rel_std`` / ``max_init_gravity_std_deg``: the dynamic initialisation's scale
     std / scale and gravity-direction std it accepts (looser than the initialiser's own gates for
-    a lone window: the smoother refines both afterwards)."""
+    a lone window: the smoother refines both afterwards); ``wheel_sigma_m_s``: standard deviation
+    of the wheel-odometry velocity (forward speed, and the zero sideways and vertical speed of a
+    ground robot) when the recording has wheel odometry (0, the default: not used; a wheel file
+    does not say the platform is a ground robot; ``amrvio run --wheels`` sets 0.05)."""
 
     enabled: bool = True
     imu_noise_scale: float = 1.0
@@ -49,6 +53,7 @@ class VioStageConfig:
     reinit_on_check_failure: bool = True
     max_init_scale_rel_std: float = 0.015
     max_init_gravity_std_deg: float = 1.0
+    wheel_sigma_m_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.imu_noise_scale) and self.imu_noise_scale > 0):
@@ -65,6 +70,8 @@ class VioStageConfig:
             raise ConfigError(f"vio.max_init_scale_rel_std must be in (0, 1), got {self.max_init_scale_rel_std}")
         if not 0 < self.max_init_gravity_std_deg < 90:
             raise ConfigError(f"vio.max_init_gravity_std_deg must be in (0, 90), got {self.max_init_gravity_std_deg}")
+        if not (np.isfinite(self.wheel_sigma_m_s) and self.wheel_sigma_m_s >= 0):
+            raise ConfigError(f"vio.wheel_sigma_m_s must be >= 0, got {self.wheel_sigma_m_s}")
         if self.min_tracks < 0:
             raise ConfigError(f"vio.min_tracks must be >= 0, got {self.min_tracks}")
 
@@ -98,11 +105,13 @@ def vio_input(t_ns: int, imu: ImuData | None, outcome: TrackOutcome, tracks: Tra
 
 @dataclass(frozen=True, slots=True)
 class ImuSetup:
-    """What the VIO stage needs beyond the camera: the IMU's noise (Kalibr densities) and the
-    camera pose in the IMU body frame."""
+    """What the VIO stage needs beyond the camera: the IMU's noise (Kalibr densities), the camera
+    pose in the IMU body frame, and the wheel odometry of a ground robot (forward = body x), if
+    any."""
 
     noise: ImuNoise
     T_body_cam: SE3
+    wheel: WheelData | None = None
 
 
 

@@ -29,7 +29,14 @@ from numpy.typing import NDArray
 
 from amrvio.diagnostics.frame import FrameDiagnostics
 from amrvio.estimator.local_mapping import LocalMapping, Segment
-from amrvio.estimator.vi_init import ViInitConfig, ViInitResult, bias_prior_from_static, initialize_vi
+from amrvio.estimator.vi_init import (
+    ViBiasPrior,
+    ViInitConfig,
+    ViInitResult,
+    ViInitStatus,
+    bias_prior_from_static,
+    initialize_vi,
+)
 from amrvio.estimator.vio_backend import VioBackend
 from amrvio.estimator.vio_types import (
     PriorSigmas,
@@ -43,7 +50,7 @@ from amrvio.imu.static_init import StaticInitResult, static_init
 from amrvio.pipeline.records import BodyTrajectory, PoseStatus
 from amrvio.pipeline.vio_report import ImuSetup, VioFrameInput, VioPhase, VioReport, VioStageConfig, vio_input
 from amrvio.types.lie import SE3, SO3, Sim3
-from amrvio.types.sensors import ImuData, ImuNoise
+from amrvio.types.sensors import ImuData
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
@@ -134,19 +141,20 @@ class BodyTrack:
 
 
 class VioStage:
-    """Construct with the stage config, the (undistorted) pinhole ``K``, ``T_body_cam``, the IMU's
-    noise and the VO's :class:`LocalMapping` (read for its keyframes and points)."""
+    """Construct with the stage config, the (undistorted) pinhole ``K``, the :class:`ImuSetup`
+    (IMU noise, ``T_body_cam``, wheel odometry) and the VO's :class:`LocalMapping` (read for its
+    keyframes and points)."""
 
-    def __init__(self, config: VioStageConfig, K: F64, T_body_cam: SE3, noise: ImuNoise,
+    def __init__(self, config: VioStageConfig, K: F64, setup: ImuSetup,
                  mapping: LocalMapping, init_config: ViInitConfig | None = None) -> None:
         self.cfg = config
-        self.T_body_cam = T_body_cam
+        self.setup = setup
         base = init_config or ViInitConfig()
         self.init_cfg = dataclasses.replace(base, gates=dataclasses.replace(
             base.gates, max_scale_rel_std=config.max_init_scale_rel_std,
             max_gravity_std_deg=config.max_init_gravity_std_deg))
-        self.backend = VioBackend(VioConfig(imu=noise, imu_noise_scale=config.imu_noise_scale,
-                                            window_keyframes=config.window_keyframes), K, T_body_cam)
+        self.backend = VioBackend(VioConfig(imu=setup.noise, imu_noise_scale=config.imu_noise_scale,
+                                            window_keyframes=config.window_keyframes), K, setup.T_body_cam)
         self.mapping = mapping
         self.imu = _ImuLog(config.max_init_window_s + 3.0)
         self.vo_keyframes: list[tuple[int, int, int]] = []  # (t_ns, segment, kf id) of one segment
@@ -176,7 +184,7 @@ class VioStage:
             events.append("vio_bridged")
             return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
         landmarks = self.backend.landmarks()
-        res = self.backend.add_frame(inp.t_ns, imu, obs)
+        res = self.backend.add_frame(inp.t_ns, imu, obs, self._wheel_velocity(inp.t_ns))
         est = res.estimate
         if not est.ok or est.state is None:
             pred = res.predicted
@@ -213,7 +221,7 @@ class VioStage:
             out[i] = T
             new[i] = PoseStatus.BRIDGED if i in self.track.bridged else PoseStatus.TRACKED
         a = self.anchor
-        T_cam_body = self.T_body_cam.inverse().matrix()
+        T_cam_body = self.setup.T_body_cam.inverse().matrix()
         for i in range(n):
             if i in self.track.poses:
                 continue
@@ -296,18 +304,26 @@ class VioStage:
         imu = self.imu.span(int(stamps[0]) - 50_000_000, int(stamps[-1]) + 50_000_000)
         prior = bias_prior_from_static(self.start.result, self.init_cfg) if self.start.result is not None \
             else None
-        res = initialize_vi(stamps, T_vo_cam, imu, self.T_body_cam, self.backend.cfg.imu, self.init_cfg, prior)
+        res = initialize_vi(stamps, T_vo_cam, imu, self.setup.T_body_cam, self.backend.cfg.imu, self.init_cfg, prior)
         self.last_init = res
-        if not res.ok or res.state is None:
+        scale, use = float(res.scale), res if res.ok else None
+        if not res.ok and self._wheel_velocity(inp.t_ns) is not None:
+            # the IMU cannot see the scale (constant velocity): the wheels can
+            w_scale, w_res = self._wheel_scale(stamps, T_vo_cam, imu, prior)
+            if w_res.state is not None and np.isfinite(w_scale):
+                scale, use = w_scale, w_res
+                events.append(f"vi_init_wheel:scale={scale:.5g}:imu_status={res.status.value}")
+        if use is None or use.state is None:
             events.append(f"vi_init_failed:{res.status.value}")
             return res
-        st = res.state
-        s, R_wv = float(st.scale), np.asarray(st.R_world_vo)
-        T_cam_body = self.T_body_cam.inverse().matrix()
+        st = use.state
+        s, R_wv = scale, np.asarray(st.R_world_vo)
+        T_cam_body = self.setup.T_body_cam.inverse().matrix()
         T_vo_body = T_vo_cam[-1] @ T_cam_body
         T_vo_body[:3, 3] = s * T_vo_cam[-1][:3, 3] + T_vo_cam[-1][:3, :3] @ T_cam_body[:3, 3]
         T_wb = SE3(SO3(R_wv @ T_vo_body[:3, :3]), R_wv @ T_vo_body[:3, 3])
-        state = InertialState(inp.t_ns, T_wb, R_wv @ np.asarray(st.velocities_vo)[-1],
+        v_vo = np.asarray(st.velocities_vo)[-1] * (s / float(st.scale))
+        state = InertialState(inp.t_ns, T_wb, R_wv @ v_vo,
                               ImuBias(np.asarray(st.gyro_bias_rad_s), np.asarray(st.accel_bias_m_s2)))
         m = seg.mapper.map
         has = m.points_of(obs.ids) if len(obs) else np.zeros(0, dtype=bool)
@@ -317,8 +333,34 @@ class VioStage:
         self.backend.initialise(VioInitialState(state, sig, ids, X), imu.window(inp.t_ns - 10**8, inp.t_ns), obs)
         self.anchor = self.anchor or VoAnchor(seg_id, s, R_wv)
         self.kind = "dynamic"
-        events.append(f"vi_init_ok:scale={s:.5g}:std={st.scale_std:.3g}")
+        if use is res:
+            events.append(f"vi_init_ok:scale={s:.5g}:std={st.scale_std:.3g}")
         return res
+
+    def _wheel_velocity(self, t_ns: int) -> tuple[F64, float] | None:
+        """The wheel odometry's body velocity (forward, 0, 0) at ``t_ns`` and its sigma, if any."""
+        wheel, sigma = self.setup.wheel, self.cfg.wheel_sigma_m_s
+        if wheel is None or sigma <= 0:
+            return None
+        v = wheel.speed_at(t_ns)
+        return (np.array([v, 0.0, 0.0]), sigma) if np.isfinite(v) else None
+
+    def _wheel_scale(self, stamps: I64, T_vo_cam: F64, imu: ImuData,
+                     prior: ViBiasPrior | None) -> tuple[float, ViInitResult]:
+        """The scale from the wheels (distance between keyframes over the VO's), with the
+        initialiser's gravity, velocities and biases solved anyway (``solve_degenerate``)."""
+        wheel = self.setup.wheel
+        if wheel is None:
+            return float("nan"), ViInitResult(ViInitStatus.TOO_FEW_KEYFRAMES, "no wheel odometry")
+        cfg = dataclasses.replace(self.init_cfg, solve_degenerate=True)
+        res = initialize_vi(stamps, T_vo_cam, imu, self.setup.T_body_cam, self.backend.cfg.imu, cfg, prior)
+        T_cam_body = self.setup.T_body_cam.inverse().matrix()
+        p_body = np.einsum("nij,j->ni", T_vo_cam, T_cam_body[:, 3])[:, :3]  # body origin, VO units
+        vo = float(np.sum(np.linalg.norm(np.diff(p_body, axis=0), axis=1)))
+        metres = sum(wheel.distance_m(int(a), int(b)) for a, b in zip(stamps[:-1], stamps[1:], strict=True))
+        # the lever arm makes the body path differ from the camera's only while turning
+        scale = metres / vo if vo > 0 and metres > 0.2 else float("nan")
+        return scale, res
 
     def _reinit(self, base: InertialState, obs: VisualObservations, imu: ImuData,
                 landmarks: tuple[I64, F64]) -> None:
