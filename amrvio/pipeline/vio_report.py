@@ -41,7 +41,9 @@ class VioStageConfig:
     a lone window: the smoother refines both afterwards); ``wheel_sigma_m_s``: standard deviation
     of the wheel-odometry velocity (forward speed, and the zero sideways and vertical speed of a
     ground robot) when the recording has wheel odometry (0, the default: not used; a wheel file
-    does not say the platform is a ground robot; ``amrvio run --wheels`` sets 0.05)."""
+    does not say the platform is a ground robot; ``amrvio run --wheels`` sets 0.05);
+    ``max_smear_px``: a frame whose gyro-predicted smear is larger is bridged by the IMU (its
+    tracks are not trusted), whatever the blur gate said."""
 
     enabled: bool = True
     imu_noise_scale: float = 1.0
@@ -54,6 +56,7 @@ class VioStageConfig:
     max_init_scale_rel_std: float = 0.015
     max_init_gravity_std_deg: float = 1.0
     wheel_sigma_m_s: float = 0.0
+    max_smear_px: float = 8.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.imu_noise_scale) and self.imu_noise_scale > 0):
@@ -72,6 +75,8 @@ class VioStageConfig:
             raise ConfigError(f"vio.max_init_gravity_std_deg must be in (0, 90), got {self.max_init_gravity_std_deg}")
         if not (np.isfinite(self.wheel_sigma_m_s) and self.wheel_sigma_m_s >= 0):
             raise ConfigError(f"vio.wheel_sigma_m_s must be >= 0, got {self.wheel_sigma_m_s}")
+        if not self.max_smear_px > 0:
+            raise ConfigError(f"vio.max_smear_px must be > 0, got {self.max_smear_px}")
         if self.min_tracks < 0:
             raise ConfigError(f"vio.min_tracks must be >= 0, got {self.min_tracks}")
 
@@ -81,7 +86,8 @@ class VioFrameInput:
     """One frame for the stage: ``t_ns``; ``imu``: samples since the previous frame (may overlap);
     ``usable``: the tracks were tracked into this image (not blurred, dropped or repeated);
     ``ids`` (N,) / ``uv`` (N, 2): the tracks, undistorted pinhole pixels; ``vo_keyframe``:
-    (segment, keyframe id) when the VO made this frame a keyframe."""
+    (segment, keyframe id) when the VO made this frame a keyframe; ``smear_px``: the motion
+    smear the gyro predicts for the exposure (the diagnostics'; NaN when unknown)."""
 
     t_ns: int
     imu: ImuData | None
@@ -89,6 +95,7 @@ class VioFrameInput:
     ids: I64
     uv: F64
     vo_keyframe: tuple[int, int] | None = None
+    smear_px: float = float("nan")
 
 
 #: tracker outcomes whose tracks were not moved into the frame's image
@@ -97,10 +104,10 @@ UNTRACKED = (TrackOutcome.SKIPPED_BLURRED, TrackOutcome.PREDICTED, TrackOutcome.
 
 
 def vio_input(t_ns: int, imu: ImuData | None, outcome: TrackOutcome, tracks: TrackSet,
-              vo_keyframe: tuple[int, int] | None) -> VioFrameInput:
+              vo_keyframe: tuple[int, int] | None, smear_px: float | None = None) -> VioFrameInput:
     """The stage's input from the tracker's outcome and its live tracks."""
     return VioFrameInput(t_ns, imu, outcome not in UNTRACKED, tracks.ids.copy(), tracks.pts.copy(),
-                         vo_keyframe)
+                         vo_keyframe, float("nan") if smear_px is None else float(smear_px))
 
 
 @dataclass(frozen=True, slots=True)

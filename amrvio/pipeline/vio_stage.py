@@ -46,7 +46,7 @@ from amrvio.estimator.vio_types import (
     VisualObservations,
 )
 from amrvio.imu.propagation import ImuBias, InertialState
-from amrvio.imu.static_init import StaticInitResult, static_init
+from amrvio.imu.static_init import StaticInitConfig, StaticInitResult, static_init
 from amrvio.pipeline.records import BodyTrajectory, PoseStatus
 from amrvio.pipeline.vio_report import ImuSetup, VioFrameInput, VioPhase, VioReport, VioStageConfig, vio_input
 from amrvio.types.lie import SE3, SO3, Sim3
@@ -176,7 +176,7 @@ class VioStage:
         if not self.running:
             return self._before(index, inp, obs, events)
         imu = self.imu.span(inp.t_ns - 200_000_000, inp.t_ns + 50_000_000) if inp.imu is None else inp.imu
-        if not inp.usable or len(obs) < self.cfg.min_tracks:
+        if not inp.usable or len(obs) < self.cfg.min_tracks or inp.smear_px > self.cfg.max_smear_px:
             est = self.backend.propagate(inp.t_ns, imu, bridged=True)
             if not est.ok or est.state is None:
                 return VioReport(VioPhase.NO_IMU, est, last_init=self.last_init, init_kind=self.kind)
@@ -286,8 +286,11 @@ class VioStage:
         bias = ImuBias(np.asarray(static.gyro_bias_rad_s), up * static.accel_bias_up_m_s2)
         state = InertialState(int(t_ns), SE3(SO3(R), np.zeros(3)), np.zeros(3), bias)
         g_std = np.asarray(static.gyro_bias_std_rad_s if static.gyro_bias_std_rad_s is not None else np.zeros(3))
+        # the accelerometer bias across gravity reads as tilt at rest: its prior is the static
+        # initialiser's (a factory-calibrated MEMS), along gravity it was measured
         sig = PriorSigmas(rotation_rad=float(np.radians(max(static.tilt_std_deg, 0.05))), position_m=1e-3,
-                          velocity_m_s=0.01, gyro_bias_rad_s=float(max(np.max(g_std), 5e-4)))
+                          velocity_m_s=0.01, gyro_bias_rad_s=float(max(np.max(g_std), 5e-4)),
+                          accel_bias_m_s2=StaticInitConfig().accel_bias_sigma_m_s2)
         self.kind = "static"
         return self.backend.initialise(VioInitialState(state, sig), self.imu.span(t_ns - 10**8, t_ns), obs)
 
