@@ -28,6 +28,9 @@ from amrvio.types.trajectory import Trajectory
 
 F64 = NDArray[np.float64]
 
+MIN_EXTENT_M = 0.01
+"""A ground truth that spans less than this over the posed frames is not aligned (at rest)."""
+
 MAX_DIFF_S = 1e-6
 """Estimate and reference share the image stamps; association needs no tolerance beyond rounding."""
 
@@ -142,6 +145,11 @@ def evaluate_run(dataset: Dataset, out: PipelineOutput,
                             else "no posed frame lies in the ground truth's time span")
         return RunEvaluation(summary, None, None)
     gt_at = gt.interpolated_at(est.stamps_s) if len(gt) >= 2 else gt
+    extent = float(np.ptp(gt_at.positions_m, axis=0).max()) if len(gt_at) else 0.0
+    if extent < MIN_EXTENT_M:
+        summary["error"] = (f"the ground truth does not move over the posed frames (extent {extent:.4f} m): "
+                            "nothing to align")
+        return RunEvaluation(summary, None, None)
     if body and len(est) == len(gt_at) and len(est) >= 3:
         summary["yaw_aligned"] = yaw_alignment(est.positions_m, gt_at.positions_m)
     try:
@@ -160,6 +168,6 @@ def evaluate_run(dataset: Dataset, out: PipelineOutput,
     return RunEvaluation(summary, sim3, se3)
 
 
-__all__ = ["MAX_DIFF_S", "RunEvaluation", "camera_groundtruth", "estimate_trajectory",
+__all__ = ["MAX_DIFF_S", "MIN_EXTENT_M", "RunEvaluation", "camera_groundtruth", "estimate_trajectory",
            "body_groundtruth", "evaluate_run", "posed_indices",
            "yaw_alignment"]
