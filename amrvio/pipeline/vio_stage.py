@@ -200,8 +200,12 @@ class VioStage:
         self.track.set(index, inp.t_ns, est.state.T_world_body)
         self.track.update(self.backend.window())
         if res.checks is not None and not res.checks.ok and self.cfg.reinit_on_check_failure:
-            events.append(f"vio_reinit:{'+'.join(c.value for c in res.checks.failed)}")
+            failed = [c.value for c in res.checks.failed]
+            events.append(f"vio_reinit:{'+'.join(failed)}")
             base = res.predicted if res.predicted is not None else est.state
+            if any(c.startswith("bias") for c in failed):
+                # a bias that ran away would stay: restart from the initialisation's biases
+                base = dataclasses.replace(base, bias=self._initial_bias(base.bias))
             self._reinit(base, obs, imu, landmarks)
         return VioReport(VioPhase.VIO, est, res.keyframe, last_init=self.last_init, checks=res.checks,
                          init_kind=self.kind)
@@ -339,6 +343,17 @@ class VioStage:
         if use is res:
             events.append(f"vi_init_ok:scale={s:.5g}:std={st.scale_std:.3g}")
         return res
+
+    def _initial_bias(self, fallback: ImuBias) -> ImuBias:
+        """The biases the running estimate started from: the dynamic initialisation's, or the
+        static one's (its gyro bias and the accelerometer bias along gravity), else ``fallback``."""
+        init = self.last_init
+        if init is not None and init.ok and init.state is not None:
+            return ImuBias(np.asarray(init.state.gyro_bias_rad_s), np.asarray(init.state.accel_bias_m_s2))
+        st = self.start.result
+        if st is not None and st.ok and st.gyro_bias_rad_s is not None and st.gravity_body is not None:
+            return ImuBias(np.asarray(st.gyro_bias_rad_s), -np.asarray(st.gravity_body) * st.accel_bias_up_m_s2)
+        return fallback
 
     def _wheel_velocity(self, t_ns: int) -> tuple[F64, float] | None:
         """The wheel odometry's body velocity (forward, 0, 0) at ``t_ns`` and its sigma, if any."""
