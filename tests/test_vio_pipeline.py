@@ -93,3 +93,20 @@ def test_no_imu_gives_the_vo_path(sim_dir: Path, tmp_path: Path) -> None:
     assert "T_world_cam" in head
     with (tmp_path / "vo" / "health.csv").open(encoding="utf-8") as fh:
         assert "vio_phase" not in next(csv.reader(fh))
+
+
+def test_yaw_alignment_recovers_a_known_rotation_about_gravity_scale_and_offset() -> None:
+    rng = np.random.default_rng(0)
+    gt = np.cumsum(rng.normal(size=(50, 3)) * [0.3, 0.3, 0.05], axis=0)
+    yaw, s, t = 0.7, 1.25, np.array([3.0, -1.0, 0.5])
+    c, sn = np.cos(yaw), np.sin(yaw)
+    Rz = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
+    est = ((gt - t) @ Rz) / s  # gt = s Rz est + t
+    al = yaw_alignment(est, gt)
+    assert al["yaw_deg"] == pytest.approx(np.degrees(yaw), abs=1e-6)
+    assert al["scale"] == pytest.approx(s, rel=1e-9) and al["ate_scaled_m"] < 1e-9
+    assert al["ate_m"] > 0.01  # without the scale the fit is off
+    # a straight line, where Umeyama's rotation is undefined, still gives yaw and scale
+    line = np.stack([np.linspace(0, 2, 20), np.zeros(20), np.zeros(20)], axis=1)
+    al = yaw_alignment(line @ Rz.T * 0.5, line)
+    assert al["scale"] == pytest.approx(2.0) and al["yaw_deg"] == pytest.approx(-np.degrees(yaw), abs=1e-6)

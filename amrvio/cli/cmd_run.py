@@ -144,7 +144,11 @@ def format_summary(summary: dict[str, Any], ev: dict[str, Any] | None, out: Path
     lines = [f"{summary['n_frames']} frames {counts}{skipped}, {summary['n_keyframes']} keyframes, "
              f"{summary['n_map_points']} map points -> {out}"]
     if ev is not None:
-        if ev.get("error"):
+        ya = ev.get("yaw_aligned")
+        if ev.get("error") and ya:
+            lines.append(f"evaluation: {ev['error']}; aligned about gravity instead: metric ATE "
+                         f"{ya['ate_m']:.3f} m, scale error {ya['scale_error_pct']:.2f} %")
+        elif ev.get("error"):
             lines.append(f"evaluation: not possible: {ev['error']}")
         else:
             text = (f"evaluation: ATE {ev['ate_sim3_m']:.3f} m Sim3 = "
