@@ -219,6 +219,11 @@ HELP: dict[str, str] = {
     "scale": "metric scale sources",
     "scale.camera_height_m": "camera height above a flat floor (m); null when unknown",
     "scale.half_window": "keyframes on each side of the running median of scale readings",
+    "scale.wheel": "scale from wheel odometry (replaces the camera height when the recording has it)",
+    "scale.wheel.enabled": "use the recording's wheel odometry for the scale (a ground robot)",
+    "scale.wheel.min_distance_m": "wheel distance between keyframes below which a pair gives no reading (m)",
+    "scale.wheel.max_turn_deg": "keyframe pairs that turned more give no reading (deg)",
+    "scale.wheel.half_window": "keyframe readings on each side of the running median",
     "output": "what is written",
     "output.final_refine": "refine non-keyframe poses against the final map",
 }
@@ -240,6 +245,9 @@ def _is_config(tp: Any) -> bool:
 KEY_BOUNDS: dict[str, tuple[float, float]] = {
     "seed": (0, 2**32 - 1),
     "scale.camera_height_m": (0.01, 100.0),
+    "scale.wheel.min_distance_m": (0.0, 100.0),
+    "scale.wheel.max_turn_deg": (0.0, 180.0),
+    "scale.wheel.half_window": (0, 10_000),
 }
 MAX_ABS_NUMBER = 1e9
 

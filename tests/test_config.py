@@ -23,6 +23,7 @@ from amrvio.config import (
     without_photometric,
 )
 from amrvio.errors import ConfigError
+from amrvio.estimator.scale_sources import CameraHeightScale
 from amrvio.pipeline.pipeline import Pipeline
 
 
@@ -100,7 +101,7 @@ def test_one_seed_reaches_every_random_stage() -> None:
     assert p.tracker.klt.seed == 11
     assert p.tracker.seed == 11
     assert p.initializer.cfg.two_view.seed == 11
-    assert p.scale.seed == 11
+    assert isinstance(p.scale, CameraHeightScale) and p.scale.seed == 11
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:

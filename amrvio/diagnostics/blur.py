@@ -54,7 +54,12 @@ def blur_score(image: NDArray[np.generic], var_lap: float | None = None) -> floa
     img = np.asarray(image)
     if var_lap is None:
         var_lap = var_laplacian(img, step=2)
-    return var_lap / max(float(np.var(img[::2, ::2])), 1.0)
+    sub = img[::2, ::2]
+    if img.dtype == np.uint8:  # a fifth of np.var's time at 752x480
+        var = float(cv2.meanStdDev(np.ascontiguousarray(sub))[1][0, 0]) ** 2
+    else:
+        var = float(np.var(sub))
+    return var_lap / max(var, 1.0)
 
 
 @dataclass(frozen=True, slots=True)

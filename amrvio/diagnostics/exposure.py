@@ -28,14 +28,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from amrvio.diagnostics.exposure_frame import ExposureFrame, clip_levels, integral_frame
 from amrvio.diagnostics.tracks import (
     TrackFrame,
     TrackingConfig,
     detection_mask,
+    diagnostics_tracker,
     prepare_track_frame,
     track_between,
     tracker_mask,
@@ -46,7 +47,7 @@ from amrvio.photometric.gain import GainFitConfig, fit_gain_offset
 from amrvio.tracking.detect import DetectorConfig, detect_corners
 from amrvio.tracking.lk import LkTracker
 
-F32 = NDArray[np.float32]
+F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
 
 
@@ -114,64 +115,19 @@ def _gain_config(cfg: ExposureConfig, linear: bool, levels: tuple[float, float])
                          fit_offset=not linear)
 
 
-def sample_patches(image: NDArray[np.generic], pts: NDArray[np.floating], radius: int) -> F32:
-    """Bilinear samples of (2r+1)^2 patches centred on (N, 2) points -> (N, (2r+1)^2) float32."""
-    offs = np.arange(-radius, radius + 1, dtype=np.float32)
-    ox, oy = np.meshgrid(offs, offs)
-    p = np.asarray(pts, dtype=np.float32)
-    mx = (p[:, 0:1] + ox.ravel()[None, :]).astype(np.float32)
-    my = (p[:, 1:2] + oy.ravel()[None, :]).astype(np.float32)
-    src = np.asarray(image, dtype=np.float32)
-    out: F32 = cv2.remap(src, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return out
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class ExposureFrame:
-    """A frame prepared for the patch fit: ``smooth`` (H, W) float32 box-filtered intensity
-    (linearised first when an inverse response is given) and ``bad`` (H, W) bool, True where the
-    box touches a saturated (>= 250) or under-exposed (<= 5) raw pixel or reaches outside the
-    image. ``linear``: linearised through an inverse response; ``clip_levels``: the raw clip
-    levels in the units of ``smooth``."""
-
-    smooth: F32
-    bad: NDArray[np.bool_]
-    linear: bool = False
-    clip_levels: tuple[float, float] = (UNDEREXPOSED_DN, SATURATED_DN)
-
-
 def prepare_exposure_frame(
     image: NDArray[np.generic],
     cfg: ExposureConfig | None = None,
     inverse_response: NDArray[np.floating] | None = None,
 ) -> ExposureFrame:
-    """Box-filter a grey frame (``cfg.smooth_px``) for :func:`fit_exposure_frames`. The low-pass
-    makes the fit insensitive to motion blur and to sub-pixel resampling, which both smooth
-    intensity and would otherwise read as a lower gain."""
+    """Prepare a grey frame for :func:`fit_exposure_frames`: the fit samples box means
+    (``cfg.smooth_px``) of it, which make the fit insensitive to motion blur and to sub-pixel
+    resampling (both smooth intensity and would otherwise read as a lower gain); see
+    :func:`~amrvio.diagnostics.exposure_frame.integral_frame`."""
     cfg = cfg or ExposureConfig()
     img = np.asarray(image)
     _check_grey(img, "image")
-    k = max(1, cfg.smooth_px)
-    src = img if inverse_response is None else linearise(img, inverse_response).astype(np.float32)
-    if img.dtype != np.uint8:
-        img = np.clip(img, 0, 255).astype(np.uint8)
-    clipped = cv2.inRange(img, int(UNDEREXPOSED_DN) + 1, int(SATURATED_DN) - 1) == 0
-    if k > 1:
-        smooth = cv2.boxFilter(src, cv2.CV_32F, (k, k), borderType=cv2.BORDER_REPLICATE)
-        bad = cv2.dilate(clipped.view(np.uint8), np.ones((k, k), np.uint8)) > 0
-        e = k // 2  # boxes that reach outside the image average replicated border pixels
-        bad[:e, :] = bad[-e:, :] = bad[:, :e] = bad[:, -e:] = True
-    else:
-        smooth, bad = src.astype(np.float32), clipped
-    return ExposureFrame(np.asarray(smooth, np.float32), np.asarray(bad, bool),
-                         inverse_response is not None, _clip_levels(inverse_response))
-
-
-def _clip_levels(inverse_response: NDArray[np.floating] | None) -> tuple[float, float]:
-    """The raw clip levels (5, 250 DN), linearised when an inverse response is given."""
-    raw = np.array([UNDEREXPOSED_DN, SATURATED_DN])
-    lev = raw if inverse_response is None else linearise(raw, inverse_response)
-    return float(lev[0]), float(lev[1])
+    return integral_frame(img, max(1, cfg.smooth_px), inverse_response)
 
 
 def fit_exposure_frames(
@@ -197,14 +153,24 @@ def fit_exposure_frames(
     r = max(cfg.patch_radius, 1)
     # the curvature needs the patch's border ring, whose own weight is zero: only the inner
     # (2r-1)^2 samples enter the fit
-    xr = sample_patches(prev.smooth, q0, r)
+    xr, bad0 = prev.patch_grid(q0.astype(np.intp), r, 2 * r + 1)
     w = _curvature_weights(xr, r, cfg.curvature_dn)
     n = 2 * r + 1
     inner = (np.arange(1, n - 1)[:, None] * n + np.arange(1, n - 1)[None, :]).ravel()
-    x, w = xr[:, inner], w[:, inner]
-    y = sample_patches(cur.smooth, q1, r - 1)
-    bad0 = _sample_mask(prev.bad, q0, r - 1)
-    bad1 = _sample_mask(cur.bad, q1, r - 1)
+    x, w, bad0 = xr[:, inner], w[:, inner], bad0[:, inner]
+    # ``cur`` at the sub-pixel positions: every sample of a patch has the same fraction, so the
+    # patch is one bilinear blend of a (2r)^2 grid of integer box means; a sample is masked when
+    # any of its four neighbours' boxes clips
+    base = np.floor(q1)
+    f = (q1 - base)[:, None, None, :]
+    g, gbad = cur.patch_grid(base.astype(np.intp), r - 1, 2 * r)
+    m = 2 * r
+    g, gbad = g.reshape(-1, m, m), gbad.reshape(-1, m, m)
+    fx, fy = f[..., 0], f[..., 1]
+    y = ((1 - fy) * ((1 - fx) * g[:, :-1, :-1] + fx * g[:, :-1, 1:])
+         + fy * ((1 - fx) * g[:, 1:, :-1] + fx * g[:, 1:, 1:])).reshape(len(q1), -1)
+    bad1 = (gbad[:, :-1, :-1] | gbad[:, :-1, 1:] | gbad[:, 1:, :-1] | gbad[:, 1:, 1:]).reshape(
+        len(q1), -1)
     linear = prev.linear and cur.linear
     gcfg = _gain_config(cfg, linear, prev.clip_levels)
     fit = fit_gain_offset(x, y, mask=~(bad0 | bad1), weights=w, config=gcfg)
@@ -278,22 +244,7 @@ def fit_exposure_on_correspondences(
     )
 
 
-def _sample_mask(mask: NDArray[np.bool_], pts: NDArray[np.floating], radius: int) -> NDArray[
-    np.bool_
-]:
-    """Nearest-pixel samples of a boolean map on the patch grid (outside the image: True)."""
-    offs = np.arange(-radius, radius + 1)
-    ox, oy = np.meshgrid(offs, offs)
-    u = np.rint(pts[:, 0:1]).astype(np.intp) + ox.ravel()[None, :]
-    v = np.rint(pts[:, 1:2]).astype(np.intp) + oy.ravel()[None, :]
-    h, w = mask.shape
-    inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
-    out = np.ones(u.shape, dtype=bool)
-    out[inside] = mask[v[inside], u[inside]]
-    return out
-
-
-def _curvature_weights(x: F32, radius: int, scale_dn: float) -> NDArray[np.float64]:
+def _curvature_weights(x: F64, radius: int, scale_dn: float) -> NDArray[np.float64]:
     # Sub-pixel resampling error ~ (d^2 / 2) * Laplacian: trust flat samples, drop patch borders.
     n = 2 * radius + 1
     p = x.reshape(-1, n, n).astype(np.float64)
@@ -327,7 +278,7 @@ def fit_exposure_same_pixel(
     if inverse_response is not None:
         xr = linearise(xr, inverse_response)
         yr = linearise(yr, inverse_response)
-    gcfg = _gain_config(cfg, inverse_response is not None, _clip_levels(inverse_response))
+    gcfg = _gain_config(cfg, inverse_response is not None, clip_levels(inverse_response))
     fit = fit_gain_offset(xr, yr, mask=mask, config=gcfg)
     return _result(fit, cfg, "same_pixel", 0)
 
@@ -372,7 +323,7 @@ def estimate_exposure_change(
     _check_grey(c, "cur")
     if p.shape != c.shape:
         raise ShapeError(f"images differ in shape: {p.shape} vs {c.shape}")
-    tracker = LkTracker(tracking.lk)
+    tracker = diagnostics_tracker(tracking, p.shape[1])
     t0, t1 = prepare_track_frame(tracker, p), prepare_track_frame(tracker, c)
     f0 = prepare_exposure_frame(p, cfg, inverse_response)
     f1 = prepare_exposure_frame(c, cfg, inverse_response)

@@ -59,10 +59,12 @@ from amrvio.diagnostics.tracks import (
     TrackFrame,
     TrackingConfig,
     detection_mask,
+    diagnostics_tracker,
     prepare_track_frame,
     track_between,
     tracker_mask,
 )
+from amrvio.diagnostics.vo_motion import MotionHistory
 from amrvio.errors import ShapeError
 from amrvio.tracking.detect import detect_corners
 from amrvio.tracking.lk import LkTracker
@@ -170,12 +172,18 @@ class FrameDiagnostics:
         self._blur = BlurScorer(self.config.blur)
         span = max(self.config.excitation_window_s, 1.0)
         self._imu = _ImuBuffer(int(span * 1e9))
-        self._tracker = LkTracker(self.config.tracking.lk)
+        self._trackers: dict[int, LkTracker] = {}  # by image width
+        self._poses = MotionHistory()  # the VO's poses, for the translational smear
         self._prev: _Previous | None = None
         self._ref = ParallaxReference()
         self._index = 0
 
     # ------------------------------------------------------------------------------------------
+    def _lk(self, width: int) -> LkTracker:
+        if width not in self._trackers:
+            self._trackers[width] = diagnostics_tracker(self.config.tracking, width)
+        return self._trackers[width]
+
     def _camera_for(self, shape: tuple[int, int]) -> CameraModel:
         if self.camera is not None:
             return self.camera
@@ -203,6 +211,35 @@ class FrameDiagnostics:
                                             self.config.smear_bound_px, motion=motion)
         return pred, advice
 
+    def observe_pose(self, t_ns: int, T_cam_world: F64 | None, segment: int | None) -> None:
+        """The pose the VO tracked for the frame at ``t_ns`` (None: none) in map ``segment``."""
+        self._poses.observe(t_ns, T_cam_world, segment)
+
+    def with_vo_motion(self, health: FrameHealth, points_world: F64) -> FrameHealth:
+        """``health`` with the smear's translational part, from the poses given to
+        :meth:`observe_pose` (up to this frame's) and the (N, 3) map points of the live tracks
+        (see :mod:`~amrvio.diagnostics.vo_motion`); unchanged without a camera or a motion."""
+        if self.camera is None:
+            return health
+        motion = self._poses.camera_motion(health.t_ns, points_world, self.camera)
+        return health if motion is None else self.with_motion(health, motion)
+
+    def with_motion(self, health: FrameHealth, motion: CameraMotion) -> FrameHealth:
+        """``health`` of a frame already processed, its smear predicted again with the camera's
+        translation (``motion``, known once the frame was tracked) added to the rotation. The
+        IMU samples of the frame must still be held (call before the next frame)."""
+        smear, advice = self._smear(health.t_ns, health.exposure.exposure_s, motion)
+        if smear is None:
+            return health
+        b = health.blur
+        blurred = b.ratio < self.config.blur.blur_ratio  # BlurScorer's own rule
+        blur = replace(
+            b, flag=bool(blurred or smear.max_px > self.config.smear_flag_px),
+            smear_px_pred=smear.max_px, smear_px_mean=smear.mean_px,
+            smear_px_rotation=smear.rotation_max_px, smear_px_translation=smear.translation_max_px,
+            max_exposure_s=advice)
+        return replace(health, blur=blur)
+
     def _new_reference(self, track: TrackFrame, expo_frame: ExposureFrame) -> None:
         t = track.image
         mask = tracker_mask(detection_mask(expo_frame.bad), t.lk.shape, t.levels)
@@ -224,11 +261,12 @@ class FrameDiagnostics:
         rotation source, and whether this frame became the parallax reference."""
         cfg, ref = self.config, self._ref
         ref.rotate(self._gyro_rotation(prev.t_ns, t_ns))
-        res = track_between(self._tracker, prev.track, track, ref.pts)
+        tracker = self._lk(img.shape[1])
+        res = track_between(tracker, prev.track, track, ref.pts)
         ok = res.ok
         pts1 = np.asarray(res.pts, dtype=np.float32)
         n_ok = int(ok.sum())
-        expo = fit_exposure_tracked(self._tracker, (prev.track, track), (prev.exposure, expo_frame),
+        expo = fit_exposure_tracked(tracker, (prev.track, track), (prev.exposure, expo_frame),
                                     ref.pts[ok], pts1[ok], cfg.exposure, cfg.tracking.detector)
         if expo is None:
             expo = fit_exposure_same_pixel(prev.image, img, cfg.exposure, self.inverse_response)
@@ -270,7 +308,7 @@ class FrameDiagnostics:
         if imu_window is not None:
             self._imu.add(imu_window)
 
-        track = prepare_track_frame(self._tracker, img)
+        track = prepare_track_frame(self._lk(img.shape[1]), img)
         expo_frame = prepare_exposure_frame(img, cfg.exposure, self.inverse_response)
         expo: ExposureChange | None = None
         parallax = float("nan")

@@ -20,9 +20,11 @@ import numpy as np
 
 from amrvio.errors import DatasetFormatError, TrajectoryFormatError
 from amrvio.io.base import (
+    WHEEL_FILE,
     Dataset,
     first_image_shape,
     read_imu_csv,
+    read_wheel_csv,
     rethrow_as_dataset_error,
     warn_missing_images,
 )
@@ -43,7 +45,6 @@ from amrvio.io.table import (
     seconds_column_ns,
 )
 from amrvio.io.trajectory import read_euroc_csv
-from amrvio.io.wheel import WHEEL_FILE, read_wheel_csv
 from amrvio.types.sensors import Frame
 from amrvio.types.trajectory import Trajectory
 
@@ -170,12 +171,13 @@ def read_asl(path: Path, kind: str = "euroc", calib: Path | None = None) -> Data
             imu_noise = read_imu_noise_file(noise_path)
             break
 
+    wheel_path = base / WHEEL_FILE
+    wheel = read_wheel_csv(wheel_path) if wheel_path.is_file() else None
     groundtruth = _groundtruth(mav)
     pcalib_path, vignette_path = find_photometric(
         [cam_dir, dso / "cam0", mav, base, *sorted(base.glob("photometric*"))]
     )
     inverse_response, vignette = read_photometric(pcalib_path, vignette_path, image_hw)
-    wheel_path = base / WHEEL_FILE
     return Dataset(
         kind=kind,
         root=path,
@@ -188,5 +190,5 @@ def read_asl(path: Path, kind: str = "euroc", calib: Path | None = None) -> Data
         groundtruth_frame="body" if groundtruth is not None else "",
         inverse_response=None if inverse_response is None else np.asarray(inverse_response),
         vignette=vignette,
-        wheel=read_wheel_csv(wheel_path) if wheel_path.is_file() else None,
+        wheel=wheel,
     )

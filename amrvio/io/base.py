@@ -26,10 +26,9 @@ from amrvio.io.table import (
     int_column,
     read_table,
 )
-from amrvio.io.wheel import WheelData
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import SE3
-from amrvio.types.sensors import Frame, ImuData, ImuNoise, ImuSample
+from amrvio.types.sensors import Frame, ImuData, ImuNoise, ImuSample, WheelData
 from amrvio.types.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -49,8 +48,8 @@ class Dataset:
     T_body_cam: camera pose in the body (IMU) frame, or None when unknown. groundtruth: poses as
     stored by the dataset (EuRoC/TUM-VI: ``T_world_body``, ``groundtruth_frame == "body"``; KITTI:
     ``T_cam0_camk``, ``"cam"``; ``""`` when there is none). inverse_response: (256,) G^-1 from
-    pcalib.txt; vignette: (H, W) in [0, 1] from vignette.png. wheel: wheel odometry of a ground
-    robot (:mod:`amrvio.io.wheel`), or None.
+    pcalib.txt; vignette: (H, W) in [0, 1] from vignette.png. wheel: wheel odometry (forward
+    speed and yaw rate) of a ground robot, or None.
     """
 
     kind: str
@@ -115,6 +114,29 @@ def read_imu_csv(path: Path) -> ImuData:
     if not len(table):
         raise DatasetFormatError(path, "IMU file has no data rows")
     return ImuData(stamps, values[:, 0:3], values[:, 3:6])
+
+
+MAX_WHEEL_SPEED_M_S = 100.0
+"""Largest |forward speed| a wheel odometry file may hold (m/s)."""
+MAX_WHEEL_YAW_RATE_RAD_S = 100.0
+"""Largest |yaw rate| a wheel odometry file may hold (rad/s)."""
+WHEEL_FILE = "wheel_odometry.csv"
+"""Wheel odometry beside ``mav0/`` (amrvio's simulator writes it there)."""
+
+
+def read_wheel_csv(path: Path) -> WheelData:
+    """Wheel odometry: ``timestamp_ns, v_forward_m_s, yaw_rate_rad_s[, ...]`` (further columns,
+    such as the simulator's ground truth, are ignored)."""
+    table = read_table(path, ",", "wheel odometry file")
+    check_columns(table, 3, "wheel odometry row")
+    stamps = int_column(table, 0, "wheel odometry timestamp [ns]")
+    values = float_columns(table, range(1, 3), "wheel odometry value")
+    check_magnitude(table, values[:, 0:1], MAX_WHEEL_SPEED_M_S, "wheel forward speed [m/s]")
+    check_magnitude(table, values[:, 1:2], MAX_WHEEL_YAW_RATE_RAD_S, "wheel yaw rate [rad/s]")
+    check_increasing(table, stamps, "wheel odometry")
+    if len(table) < 2:
+        raise DatasetFormatError(path, "wheel odometry file needs at least 2 data rows")
+    return WheelData(stamps, values[:, 0], values[:, 1])
 
 
 def warn_missing_images(path: Path, n_missing: int, n_rows: int) -> None:

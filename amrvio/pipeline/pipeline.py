@@ -22,7 +22,7 @@ from amrvio.diagnostics.frame import FrameDiagnostics, FrameHealth
 from amrvio.estimator.camera_height import HeightEstimate
 from amrvio.estimator.initializer import Initializer, InitResult
 from amrvio.estimator.local_mapping import KeyframeReport, LocalMapping
-from amrvio.estimator.scale_sources import CameraHeightScale
+from amrvio.estimator.scale_sources import make_scale_source
 from amrvio.frontend.keyframe_policy import KeyframeReason
 from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, TrackOutcome
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
@@ -31,7 +31,7 @@ from amrvio.pipeline.recovery import MapRecovery, implausible_jump, link_to_prev
 from amrvio.pipeline.vio_stage import ImuSetup, SensorStages, VioStage, vio_input
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import Sim3, se3_matrix_inverse
-from amrvio.types.sensors import ImuData
+from amrvio.types.sensors import ImuData, WheelData
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
@@ -61,7 +61,8 @@ class Pipeline:
     """
 
     def __init__(self, camera: CameraModel | F64, config: PipelineConfig | None = None,
-                 diagnostics: FrameDiagnostics | None = None, imu: ImuSetup | None = None) -> None:
+                 diagnostics: FrameDiagnostics | None = None, imu: ImuSetup | None = None,
+                 wheel: WheelData | None = None) -> None:
         cfg = config or PipelineConfig()
         self.cfg = cfg
         self.camera = camera if isinstance(camera, CameraModel) else None
@@ -71,7 +72,7 @@ class Pipeline:
         self.tracker = Tracker(K, tracking, cfg.seed)
         self.initializer = Initializer(K, cfg.init, cfg.seed)
         self.mapping = LocalMapping(K, cfg.mapping)
-        self.scale = CameraHeightScale(cfg.scale, cfg.seed)
+        self.scale = make_scale_source(cfg.scale, cfg.seed, wheel)
         self.recovery = MapRecovery(K, cfg.recovery, cfg.seed)
         self.composer = TrajectoryComposer(K, RefineGates(
             cfg.output.final_refine, tracking.min_pnp_inliers, tracking.huber_px,
@@ -141,6 +142,13 @@ class Pipeline:
 
     def _emit(self, index: int, t_ns: int, blur: BlurResult, health: FrameHealth | None,
               step: _Step, events: list[str], imu: ImuData | None) -> FrameRecord:
+        diag = self.sensors.diagnostics
+        if diag is not None:  # the smear's translational part, from the VO's motion
+            tracked = step.anchor.status is PoseStatus.TRACKED and self.tracker.mapped
+            diag.observe_pose(t_ns, step.T_cam_world if tracked else None, self._segment_id())
+            if health is not None and self.tracker.mapped and self.mapping.segments:
+                m, ids = self.mapping.current.mapper.map, self.tracker.tracks.ids
+                health = diag.with_vo_motion(health, m.xyz[ids[m.points_of(ids)]])
         self.composer.add(step.anchor)
         kf = (self._segment_id() or 0, step.keyframe.kf_id) if step.keyframe is not None else None
         t0 = time.perf_counter()
@@ -368,7 +376,8 @@ class Pipeline:
             return PipelineOutput(tuple(self.records), np.zeros((0, 4, 4)),
                                   np.zeros(0, dtype=np.int64), np.zeros((0, 3)), (), np.ones(n),
                                   self.all_timings())
-        frame_scale = self.scale.frame_scales(n) if self.scale.active else None
+        stamps = np.array([r.t_ns for r in self.records], dtype=np.int64)
+        frame_scale = self.scale.frame_scales(n, stamps) if self.scale.active else None
         composed = self.composer.finish(self.mapping.segments, frame_scale)
         fs = frame_scale if frame_scale is not None else np.ones(n)
         g_scale = float(np.median(fs)) if n else 1.0

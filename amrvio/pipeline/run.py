@@ -72,7 +72,8 @@ def run_pipeline(
     if diagnostics is None and cfg.diagnose:
         diagnostics = setup_diagnostics(dataset, cfg.diagnostics)
     inertial = imu_setup(dataset, cfg)
-    pipe = Pipeline(cam, cfg, diagnostics.stage if diagnostics is not None else None, inertial)
+    pipe = Pipeline(cam, cfg, diagnostics.stage if diagnostics is not None else None, inertial,
+                    wheel=dataset.wheel)
     expo_default = diagnostics.config.assumed_exposure_s if diagnostics is not None else None
     frames = dataset.frames[:max_frames] if max_frames else dataset.frames
     it: Iterable[Frame] = frames

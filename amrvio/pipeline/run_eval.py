@@ -4,10 +4,10 @@ The reference is the camera's ground truth at the image times: the dataset's bod
 right-multiplied by ``T_body_cam`` (EuRoC, TUM-VI, the simulator), or its camera poses (KITTI),
 interpolated at each image time inside the ground truth's span. The estimate is the refined
 trajectory of the frames that have a pose (``trajectory.tum``). Sim3 alignment gives the ATE
-whatever the scale; with a metric scale source (``scale.camera_height_m``) an SE3 alignment also
-gives the metric ATE and the scale error (the Sim3 scale's distance from 1). With VIO the
-estimate and the reference are body (IMU) poses, and the IMU makes the scale metric: both
-alignments are reported.
+whatever the scale; with a metric scale source (wheel odometry, ``scale.camera_height_m``) an
+SE3 alignment also gives the metric ATE and the scale error (the Sim3 scale's distance from 1).
+With VIO the estimate and the reference are body (IMU) poses, and the IMU makes the scale
+metric: both alignments are reported.
 """
 
 from __future__ import annotations
@@ -132,11 +132,13 @@ def evaluate_run(dataset: Dataset, out: PipelineOutput,
     est = estimate_trajectory(out)
     inside = (est.stamps_s >= gt.stamps_s[0]) & (est.stamps_s <= gt.stamps_s[-1])
     est = est.select(np.flatnonzero(inside))
-    metric = cfg.scale.camera_height_m is not None or body
+    wheel = dataset.wheel is not None and cfg.scale.wheel.enabled
+    metric = wheel or cfg.scale.camera_height_m is not None or body
     summary: dict[str, Any] = {
         "reference": f"{'body' if body else 'camera'} ground truth ({source}) interpolated at the image times",
         "n_frames": n, "n_in_trajectory": int(inside.size), "n_evaluated": len(est),
-        "metric_scale_source": "imu" if body else "camera_height" if metric else None,
+        "metric_scale_source": ("imu" if body else "wheel_odometry" if wheel
+                                else "camera_height" if metric else None),
         "frame": "body" if body else "cam",
         "error": None, "sim3": None, "se3": None,
     }

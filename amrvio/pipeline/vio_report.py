@@ -19,9 +19,8 @@ from amrvio.estimator.vio_types import VioEstimate
 from amrvio.frontend.tracker import TrackOutcome
 from amrvio.frontend.tracks import TrackSet
 from amrvio.imu.static_init import StaticInitResult
-from amrvio.io.wheel import WheelData
 from amrvio.types.lie import SE3
-from amrvio.types.sensors import ImuData, ImuNoise
+from amrvio.types.sensors import ImuData, ImuNoise, WheelData
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]

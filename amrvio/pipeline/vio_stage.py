@@ -360,8 +360,11 @@ class VioStage:
         wheel, sigma = self.setup.wheel, self.cfg.wheel_sigma_m_s
         if wheel is None or sigma <= 0:
             return None
-        v = wheel.speed_at(t_ns)
-        return (np.array([v, 0.0, 0.0]), sigma) if np.isfinite(v) else None
+        t = wheel.stamps_ns
+        if len(t) < 2 or not int(t[0]) <= t_ns <= int(t[-1]):
+            return None
+        v = float(np.interp(float(t_ns), t.astype(np.float64), wheel.v_forward_m_s))
+        return np.array([v, 0.0, 0.0]), sigma
 
     def _wheel_scale(self, stamps: I64, T_vo_cam: F64, imu: ImuData,
                      prior: ViBiasPrior | None) -> tuple[float, ViInitResult]:

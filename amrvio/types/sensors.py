@@ -70,6 +70,46 @@ class ImuData:
         return self.stamps_ns.astype(np.float64) * 1e-9
 
 
+@dataclass(frozen=True, slots=True, eq=False)
+class WheelData:
+    """Wheel odometry of a ground robot: stamps_ns (N,) int64 strictly increasing, the forward
+    speed of the base (m/s) and its yaw rate (rad/s), both (N,)."""
+
+    stamps_ns: NDArray[np.int64]
+    v_forward_m_s: F64
+    yaw_rate_rad_s: F64
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.stamps_ns)
+        v = np.asarray(self.v_forward_m_s, dtype=np.float64)
+        w = np.asarray(self.yaw_rate_rad_s, dtype=np.float64)
+        if t.ndim != 1 or v.shape != t.shape or w.shape != t.shape:
+            raise ShapeError(f"wheel arrays must all be (N,); got {t.shape}, {v.shape}, {w.shape}")
+        if not (np.all(np.isfinite(v)) and np.all(np.isfinite(w))):
+            raise ShapeError("wheel odometry contains non-finite values")
+        if t.shape[0] > 1 and np.any(np.diff(t) <= 0):
+            raise ShapeError("wheel odometry stamps are not strictly increasing")
+        object.__setattr__(self, "stamps_ns", _ro(t, np.int64))
+        object.__setattr__(self, "v_forward_m_s", _ro(v, np.float64))
+        object.__setattr__(self, "yaw_rate_rad_s", _ro(w, np.float64))
+
+    def __len__(self) -> int:
+        return int(self.stamps_ns.shape[0])
+
+    def distance_m(self, t0_ns: int, t1_ns: int) -> float:
+        """Path length (m) driven in [t0_ns, t1_ns]: the integral of |speed|, linear between
+        readings (trapezoids; the speed at t0 and t1 interpolated). NaN when the readings do not
+        cover the interval."""
+        t = self.stamps_ns
+        if len(self) < 2 or t0_ns < t[0] or t1_ns > t[-1] or t1_ns < t0_ns:
+            return float("nan")
+        lo = int(np.searchsorted(t, t0_ns, side="right"))
+        hi = int(np.searchsorted(t, t1_ns, side="left"))
+        ts = np.concatenate([[t0_ns], t[lo:hi], [t1_ns]]).astype(np.float64) * 1e-9
+        speed = np.abs(np.interp(ts, t.astype(np.float64) * 1e-9, self.v_forward_m_s))
+        return float(np.sum(0.5 * (speed[1:] + speed[:-1]) * np.diff(ts)))
+
+
 @dataclass(frozen=True, slots=True)
 class ImuNoise:
     """Continuous-time IMU noise (Kalibr/EuRoC convention).
