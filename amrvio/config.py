@@ -23,6 +23,7 @@ from amrvio.estimator.local_mapping import MappingConfig
 from amrvio.estimator.scale_sources import ScaleConfig
 from amrvio.frontend.tracker import TrackingConfig
 from amrvio.pipeline.recovery import RecoveryConfig
+from amrvio.pipeline.vio_report import VioStageConfig
 
 #: nested fields that the top-level ``seed`` replaces
 _SEED = "seed"
@@ -50,6 +51,7 @@ class PipelineConfig:
     recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
     scale: ScaleConfig = field(default_factory=ScaleConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
+    vio: VioStageConfig = field(default_factory=VioStageConfig)
 
 
 #: one line of help per field, by dotted path; `amrvio config --dump` prints them as comments
@@ -168,6 +170,19 @@ HELP: dict[str, str] = {
     "recovery.max_features": "ORB descriptors kept per keyframe",
     "recovery.max_bridge_frames": "unusable frames after which the map is searched first",
     "recovery.reloc": "relocalisation gates (ORB-SLAM's)",
+    "vio": "visual-inertial odometry, when the recording has an IMU",
+    "vio.enabled": "run VIO when the recording has an IMU (false, or --no-imu: the VO alone)",
+    "vio.imu_noise_scale": "factor on the IMU's noise densities and random walks",
+    "vio.window_keyframes": "keyframes in the fixed-lag smoother",
+    "vio.static_init_s": "still this long from the start: static initialisation (s; 0: never)",
+    "vio.min_init_keyframes": "VO keyframes the dynamic initialisation needs",
+    "vio.max_init_window_s": "longest span of VO keyframes the dynamic initialisation uses (s)",
+    "vio.min_tracks": "fewer tracks than this and the IMU bridges the frame",
+    "vio.reinit_on_check_failure": "re-initialise the smoother when a consistency check fails",
+    "vio.max_init_scale_rel_std": "scale std / scale the dynamic initialisation must reach",
+    "vio.max_init_gravity_std_deg": "gravity-direction std the dynamic initialisation must reach (deg)",
+    "vio.max_smear_px": "gyro-predicted smear (px) above which a frame is bridged by the IMU",
+    "vio.wheel_sigma_m_s": "std of the wheel-odometry body velocity (m/s; 0: wheels not used; --wheels: 0.05)",
     "recovery.link": "placing a new map by the 3-D points it shares with the previous one",
     "recovery.link.min_common": "shared points needed",
     "recovery.link.min_inlier_ratio": "share of them the similarity must explain",

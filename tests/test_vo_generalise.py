@@ -9,6 +9,7 @@ the full-size protocol.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -25,13 +26,15 @@ from amrvio.types.trajectory import Trajectory
 
 
 def _run(tmp: Path, **sim: object) -> tuple[PipelineOutput, float]:
-    """Simulate, run the VO with the default configuration; (output, Sim3 ATE % of the path)."""
+    """Simulate, run the VO with the default configuration (the IMU off: these are the VO's
+    properties; tests/test_vio_pipeline.py runs the VIO); (output, Sim3 ATE % of the path)."""
     simulate(SimConfig(fps=20.0, blur=False, **sim), tmp / "seq")  # type: ignore[arg-type]
     ds = open_dataset(str(tmp / "seq"))
     if ds.groundtruth is None or ds.T_body_cam is None:
         raise AssertionError("the simulator wrote no ground truth")
     gt = ds.groundtruth.right_multiplied(ds.T_body_cam)
-    out = run_pipeline(ds, PipelineConfig())
+    cfg = PipelineConfig()
+    out = run_pipeline(ds, dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, enabled=False)))
     est = Trajectory.from_matrices(out.stamps_ns * 1e-9, out.T_world_cam)
     res = evaluate(est, gt, align="sim3")
     return out, 100.0 * res.ate.rmse / res.path_length_m

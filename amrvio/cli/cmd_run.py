@@ -58,6 +58,15 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
                              "alignment assume brightness constancy (ablation)")
     parser.add_argument("--no-blur-gating", action="store_true",
                         help="use blurred frames like sharp ones (ablation; config: blur_gating)")
+    parser.add_argument("--no-imu", action="store_true",
+                        help="ignore the recording's IMU: the monocular VO alone, up to scale "
+                             "(default: visual-inertial odometry whenever the recording has an IMU "
+                             "and a camera-IMU transform; config: vio.enabled)")
+    parser.add_argument("--wheels", action="store_true",
+                        help="a ground robot: use the recording's wheel odometry (forward speed, "
+                             "no sideways or vertical motion) in the VIO, and as the VO's scale "
+                             "source, which makes the scale metric even at constant velocity "
+                             "(config: vio.wheel_sigma_m_s, scale.wheel.enabled)")
     parser.add_argument("--ba-backend", choices=("gtsam", "schur", "scipy"), default=None,
                         help="local bundle adjustment solver (default: gtsam, LM with "
                              "SEQUENTIAL_CHOLESKY; schur: the same LM in NumPy on the reduced "
@@ -78,6 +87,13 @@ def build_config(args: argparse.Namespace) -> object:
         cfg = without_photometric(cfg)
     if args.no_blur_gating:
         cfg = dataclasses.replace(cfg, blur_gating=False)
+    if getattr(args, "no_imu", False):
+        cfg = dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, enabled=False))
+    if getattr(args, "wheels", False):
+        if cfg.vio.wheel_sigma_m_s <= 0:
+            cfg = dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, wheel_sigma_m_s=0.05))
+        cfg = dataclasses.replace(cfg, scale=dataclasses.replace(
+            cfg.scale, wheel=dataclasses.replace(cfg.scale.wheel, enabled=True)))
     if args.camera_height is not None:
         cfg = dataclasses.replace(cfg, scale=dataclasses.replace(
             cfg.scale, camera_height_m=args.camera_height))
@@ -133,7 +149,11 @@ def format_summary(summary: dict[str, Any], ev: dict[str, Any] | None, out: Path
     lines = [f"{summary['n_frames']} frames {counts}{skipped}, {summary['n_keyframes']} keyframes, "
              f"{summary['n_map_points']} map points -> {out}"]
     if ev is not None:
-        if ev.get("error"):
+        ya = ev.get("yaw_aligned")
+        if ev.get("error") and ya:
+            lines.append(f"evaluation: {ev['error']}; aligned about gravity instead: metric ATE "
+                         f"{ya['ate_m']:.3f} m, scale error {ya['scale_error_pct']:.2f} %")
+        elif ev.get("error"):
             lines.append(f"evaluation: not possible: {ev['error']}")
         else:
             text = (f"evaluation: ATE {ev['ate_sim3_m']:.3f} m Sim3 = "

@@ -149,8 +149,12 @@ class VioBackend:
         p_sig, v_sig = world_position_velocity_sigma(state, cov)
         return VioEstimate(int(t_ns), kind, VioStatus.OK, state, p_sig, v_sig, since)
 
-    def add_frame(self, t_ns: int, imu: ImuData, observations: VisualObservations) -> FrameResult:
-        """Insert the frame at ``t_ns`` and update the window (see the module docstring)."""
+    def add_frame(self, t_ns: int, imu: ImuData, observations: VisualObservations,
+                  body_velocity: tuple[F64, float] | None = None) -> FrameResult:
+        """Insert the frame at ``t_ns`` and update the window (see the module docstring).
+        ``body_velocity``: a measured velocity of the body in its own frame (3,) m/s and its
+        standard deviation per axis (wheel odometry: forward speed, no sideways or vertical
+        motion); it becomes a prior on the world velocity through the IMU-predicted attitude."""
         import gtsam
 
         t0, t_ns, nobs = time.perf_counter(), int(t_ns), len(observations)
@@ -186,6 +190,10 @@ class VioBackend:
         values.insert(X, to_gtsam_pose(predicted.T_world_body))
         values.insert(V, np.asarray(predicted.v_world_m_s))
         values.insert(B, to_gtsam_bias(last.bias))
+        if body_velocity is not None:
+            v_body, v_sigma = body_velocity
+            v_world = predicted.T_world_body.R @ np.asarray(v_body, dtype=np.float64)
+            graph.add(gtsam.PriorFactorVector(V, v_world, gtsam.noiseModel.Isotropic.Sigma(3, float(v_sigma))))
         stamps: dict[int, float] = dict.fromkeys((X, V, B), float(ordinal))
         frame = WindowFrame(k, t_ns, ordinal, is_kf)
         removed: list[int] = []
@@ -257,6 +265,15 @@ class VioBackend:
                                from_gtsam_bias(vals.atConstantBias(B)))
             out.append((st, f.keyframe))
         return tuple(out)
+
+    def landmarks(self) -> tuple[NDArray[np.int64], F64]:
+        """The front-end ids (L,) and current world positions (L, 3) of the window's landmarks
+        (for a re-initialisation that keeps them)."""
+        if self._values is None or not self._tracks.active:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
+        ids = np.array(sorted(self._tracks.active), dtype=np.int64)
+        X = np.array([self._landmark(self._tracks.active[int(i)].key) for i in ids])
+        return ids, X.reshape(-1, 3)
 
     # ------------------------------------------------------------------ helpers
 

@@ -6,8 +6,10 @@ Each frame's ``events`` strings (``init_ok:ref=K``, ``init_failed:STATUS``, ``lo
 them: the initialisation attempt (:class:`~amrvio.estimator.initializer.InitResult`), the tracking
 report of a loss, the keyframe made. A frame with an initialisation attempt and no init event
 gets an ``init_attempt`` line; every keyframe a ``keyframe`` line (its triangulation and BA
-reports); every camera-height reading a ``scale_reading`` line. After the run, ``dropped`` lines
-name the ranges of frames that have no pose (final status LOST) with their likely causes, and
+reports); every camera-height reading a ``scale_reading`` line; every visual-inertial
+initialisation a ``vi_init`` line (status, advice, excitation, figures, state) or a
+``static_init`` line, and the VIO stage's ``vio_reinit`` / ``vio_failed`` events say why. After
+the run, ``dropped`` lines name the ranges of frames that have no pose (final status LOST) with their likely causes, and
 ``skipped`` lines the images that could not be used.
 
 Every line has ``type``, ``frame`` (the record's index, or the dataset's for a skipped image) and
@@ -135,6 +137,15 @@ def frame_events(rec: FrameRecord) -> list[dict[str, Any]]:
     if est.scale is not None:
         line = _head(rec, "scale_reading")
         line.update(jsonable(est.scale))
+        out.append(line)
+    vio = est.vio
+    if vio is not None and vio.vi_init is not None:
+        line = _head(rec, "vi_init")
+        line.update(jsonable(vio.vi_init))
+        out.append(line)
+    if vio is not None and vio.static is not None:
+        line = _head(rec, "static_init")
+        line.update(jsonable(vio.static))
         out.append(line)
     return out
 

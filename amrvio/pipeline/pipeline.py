@@ -1,8 +1,6 @@
-"""The per-frame loop, in the order of the seed's flowchart:
-
-    FrameDiagnostics -> blur gate -> Tracker (owns the TrackSet) -> Initializer (InitResult)
-    -> LocalMapping (keyframes, triangulation, local BA; the VI smoother plugs in here)
-    -> scale sources (camera height) -> TrajectoryComposer
+"""The per-frame loop, in the order of the seed's flowchart: FrameDiagnostics -> blur gate ->
+Tracker (owns the TrackSet) -> Initializer (InitResult) -> LocalMapping (keyframes, triangulation,
+local BA) -> scale sources (camera height) -> VioStage (with an IMU) -> TrajectoryComposer.
 
 ``Pipeline.process(image, t_ns)`` returns the frame's :class:`FrameRecord`; ``finish()`` composes
 the refined trajectory and returns every record with its final pose. The pipeline wires the
@@ -30,6 +28,7 @@ from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, Track
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
 from amrvio.pipeline.records import EstimatorReport, FrameRecord, PipelineOutput, PoseStatus
 from amrvio.pipeline.recovery import MapRecovery, implausible_jump, link_to_previous
+from amrvio.pipeline.vio_stage import ImuSetup, SensorStages, VioStage, vio_input
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import Sim3, se3_matrix_inverse
 from amrvio.types.sensors import ImuData, WheelData
@@ -62,7 +61,8 @@ class Pipeline:
     """
 
     def __init__(self, camera: CameraModel | F64, config: PipelineConfig | None = None,
-                 diagnostics: FrameDiagnostics | None = None, wheel: WheelData | None = None) -> None:
+                 diagnostics: FrameDiagnostics | None = None, imu: ImuSetup | None = None,
+                 wheel: WheelData | None = None) -> None:
         cfg = config or PipelineConfig()
         self.cfg = cfg
         self.camera = camera if isinstance(camera, CameraModel) else None
@@ -77,7 +77,9 @@ class Pipeline:
         self.composer = TrajectoryComposer(K, RefineGates(
             cfg.output.final_refine, tracking.min_pnp_inliers, tracking.huber_px,
             tracking.pnp_thresh_px))
-        self.diagnostics = diagnostics
+        vio = VioStage(cfg.vio, K, imu, self.mapping) \
+            if imu is not None and cfg.vio.enabled and cfg.track else None
+        self.sensors = SensorStages(diagnostics, vio)
         self.blur = BlurScorer(cfg.diagnostics.blur)
         self.records: list[FrameRecord] = []
         self.timings: dict[str, float] = {}
@@ -92,9 +94,9 @@ class Pipeline:
         since the previous frame (for the diagnostics)."""
         index = len(self.records)
         health = None
-        if self.diagnostics is not None:
+        if self.sensors.diagnostics is not None:
             t0 = time.perf_counter()
-            health = self.diagnostics.process(image, t_ns, imu, exposure_s, index)
+            health = self.sensors.diagnostics.process(image, t_ns, imu, exposure_s, index)
             self._toc("diagnostics", t0)
         cam = self.camera
         undistorted = False
@@ -136,11 +138,11 @@ class Pipeline:
             step = self._init_step(index, image, blurred, events)
         else:
             step = self._track_step(index, image, blurred, events)
-        return self._emit(index, t_ns, blur, health, step, events)
+        return self._emit(index, t_ns, blur, health, step, events, imu)
 
     def _emit(self, index: int, t_ns: int, blur: BlurResult, health: FrameHealth | None,
-              step: _Step, events: list[str]) -> FrameRecord:
-        diag = self.diagnostics
+              step: _Step, events: list[str], imu: ImuData | None) -> FrameRecord:
+        diag = self.sensors.diagnostics
         if diag is not None:  # the smear's translational part, from the VO's motion
             tracked = step.anchor.status is PoseStatus.TRACKED and self.tracker.mapped
             diag.observe_pose(t_ns, step.T_cam_world if tracked else None, self._segment_id())
@@ -148,12 +150,18 @@ class Pipeline:
                 m, ids = self.mapping.current.mapper.map, self.tracker.tracks.ids
                 health = diag.with_vo_motion(health, m.xyz[ids[m.points_of(ids)]])
         self.composer.add(step.anchor)
+        kf = (self._segment_id() or 0, step.keyframe.kf_id) if step.keyframe is not None else None
+        t0 = time.perf_counter()
+        vio = None if self.sensors.vio is None else self.sensors.vio.process(
+            index, vio_input(t_ns, imu, step.tracking.outcome, self.tracker.tracks, kf,
+                             health.blur.smear_px_pred if health is not None else None), events)
+        self._toc("vio", t0)
         segs = self.mapping.segments
         T_wc = segs[-1].pose_in_world(step.T_cam_world) if segs else se3_matrix_inverse(step.T_cam_world)
         tracking = dataclasses.replace(step.tracking, n_tracks=len(self.tracker.tracks))
         rec = FrameRecord(index, t_ns, step.anchor.status, to_se3(T_wc), None,
                           step.anchor.segment, 1.0, tuple(events), blur, health, tracking,
-                          EstimatorReport(step.init, step.keyframe, step.scale))
+                          EstimatorReport(step.init, step.keyframe, step.scale, vio))
         self.records.append(rec)
         return rec
 
@@ -374,15 +382,17 @@ class Pipeline:
         fs = frame_scale if frame_scale is not None else np.ones(n)
         g_scale = float(np.median(fs)) if n else 1.0
         pts = [sg.points_in_world(g_scale) for sg in self.mapping.segments]
+        vio, statuses = self.sensors.vio, list(composed.statuses)
+        body, statuses = vio.finish(composed.T_world_cam, statuses, self.mapping.segments) if vio else (None, statuses)
         records = tuple(
-            dataclasses.replace(r, status=composed.statuses[i],
+            dataclasses.replace(r, status=statuses[i],
                                 pose_refined=to_se3(composed.T_world_cam[i]),
                                 segment=self.composer.anchors[i].segment, scale_factor=float(fs[i]))
             for i, r in enumerate(self.records))
         kf_idx = np.array([i for i, r in enumerate(records) if r.is_keyframe], dtype=np.int64)
         return PipelineOutput(records, composed.T_world_cam, kf_idx,
                               np.vstack(pts) if pts else np.zeros((0, 3)),
-                              tuple(self.scale.readings), fs, self.all_timings())
+                              tuple(self.scale.readings), fs, self.all_timings(), body)
 
 
 __all__ = ["Pipeline", "PipelineOutput"]

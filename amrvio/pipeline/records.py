@@ -20,6 +20,7 @@ from amrvio.estimator.camera_height import HeightEstimate
 from amrvio.estimator.initializer import InitResult
 from amrvio.estimator.local_mapping import KeyframeReport
 from amrvio.frontend.tracker import TrackingReport
+from amrvio.pipeline.vio_report import VioReport
 from amrvio.types.lie import SE3
 
 F64 = NDArray[np.float64]
@@ -30,18 +31,20 @@ class PoseStatus(Enum):
 
     TRACKED = "tracked"
     INTERPOLATED = "interpolated"
+    BRIDGED = "bridged"  # VIO: an IMU prediction for a frame the smoother did not get
     LOST = "lost"
 
 
 @dataclass(frozen=True, slots=True)
 class EstimatorReport:
     """What the estimator stages did at a frame: the initialisation attempt, the keyframe made
-    (triangulation and BA reports), the camera-height reading; each None when it did not
-    happen."""
+    (triangulation and BA reports), the camera-height reading, the visual-inertial stage's report;
+    each None when it did not happen (``vio``: None without an IMU)."""
 
     init: InitResult | None = None
     keyframe: KeyframeReport | None = None
     scale: HeightEstimate | None = None
+    vio: VioReport | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,10 +83,22 @@ class FrameRecord:
 
 
 @dataclass(frozen=True, slots=True)
+class BodyTrajectory:
+    """The visual-inertial trajectory: (N, 4, 4) ``T_world_body`` of the IMU body frame in the
+    gravity-aligned metric world (z up), one per record, NaN where a frame has none; ``init_frame``:
+    the record where the visual-inertial estimate started (frames before it are the VO's poses,
+    put in that world by the initialisation's scale and gravity)."""
+
+    T_world_body: F64
+    init_frame: int
+
+
+@dataclass(frozen=True, slots=True)
 class PipelineOutput:
     """The run: one record per frame (final poses), (N, 4, 4) ``T_world_cam`` of the refined
     trajectory, keyframe frame indices, (P, 3) map points, the camera-height readings, the
-    per-frame scale and seconds per stage."""
+    per-frame scale, seconds per stage, and the body trajectory of the visual-inertial run (None
+    when it did not run or never initialised)."""
 
     records: tuple[FrameRecord, ...]
     T_world_cam: F64
@@ -92,10 +107,11 @@ class PipelineOutput:
     height_readings: tuple[HeightEstimate, ...]
     frame_scale: F64
     timings_s: dict[str, float]
+    body: BodyTrajectory | None = None
 
     @property
     def stamps_ns(self) -> NDArray[np.int64]:
         return np.array([r.t_ns for r in self.records], dtype=np.int64)
 
 
-__all__ = ["EstimatorReport", "FrameRecord", "PipelineOutput", "PoseStatus"]
+__all__ = ["BodyTrajectory", "EstimatorReport", "FrameRecord", "PipelineOutput", "PoseStatus"]

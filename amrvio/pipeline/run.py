@@ -31,7 +31,8 @@ from amrvio.pipeline.diagnose import DiagnosticsSetup, setup_diagnostics
 from amrvio.pipeline.events import flagged_ranges
 from amrvio.pipeline.pipeline import Pipeline, PipelineOutput
 from amrvio.pipeline.records import FrameRecord, PoseStatus
-from amrvio.types.sensors import Frame
+from amrvio.pipeline.vio_report import VIO_COLUMNS, ImuSetup
+from amrvio.types.sensors import Frame, ImuNoise
 from amrvio.types.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -70,7 +71,8 @@ def run_pipeline(
         raise DatasetFormatError(dataset.root, "the dataset has no camera calibration; pass one")
     if diagnostics is None and cfg.diagnose:
         diagnostics = setup_diagnostics(dataset, cfg.diagnostics)
-    pipe = Pipeline(cam, cfg, diagnostics.stage if diagnostics is not None else None,
+    inertial = imu_setup(dataset, cfg)
+    pipe = Pipeline(cam, cfg, diagnostics.stage if diagnostics is not None else None, inertial,
                     wheel=dataset.wheel)
     expo_default = diagnostics.config.assumed_exposure_s if diagnostics is not None else None
     frames = dataset.frames[:max_frames] if max_frames else dataset.frames
@@ -98,7 +100,7 @@ def run_pipeline(
                 sink.skip(image)
             continue
         imu = None
-        if dataset.imu is not None and diagnostics is not None:
+        if dataset.imu is not None and (diagnostics is not None or inertial is not None):
             imu = frame_imu_window(dataset.imu, fr.t_ns, prev_t,
                                    fr.exposure_s or expo_default or 0.0)
         rec = pipe.process(image, fr.t_ns, imu, fr.exposure_s)
@@ -109,6 +111,14 @@ def run_pipeline(
         raise DatasetFormatError(first_skip.file, f"{first_skip.problem}; no usable image: all "
                                                   f"{n_skipped} frames are unusable")
     return pipe.finish()
+
+
+def imu_setup(dataset: Dataset, config: PipelineConfig) -> ImuSetup | None:
+    """The VIO stage's inputs when the recording has an IMU and its camera-IMU transform and
+    ``config.vio.enabled`` (None: the VO alone). Without a noise file, the ADIS16448's."""
+    if dataset.imu is None or len(dataset.imu) < 2 or dataset.T_body_cam is None or not config.vio.enabled:
+        return None
+    return ImuSetup(dataset.imu_noise or ImuNoise.euroc_adis16448(), dataset.T_body_cam, dataset.wheel)
 
 
 def diagnose(dataset: Dataset, config: PipelineConfig | None = None, *,
@@ -145,6 +155,10 @@ def write_health(path: Path, records: Sequence[FrameRecord],
         for i, (row, r) in enumerate(zip(rows, records, strict=True)):
             on = online_status[i] if online_status is not None else None
             row.update(zip(FRAME_COLUMNS, frame_row(r, on), strict=True))
+            if r.estimator.vio is not None:
+                row.update(r.estimator.vio.health_fields())
+        if any(r.estimator.vio is not None for r in records):
+            cols += VIO_COLUMNS
     with path.open("w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
         w.writeheader()
@@ -185,6 +199,13 @@ TRAJECTORY_COMMENT = ("# amrvio {name}: T_world_cam, the camera pose in the worl
                       "out (their status is in health.csv)")
 
 
+BODY_TRAJECTORY_COMMENT = (
+    "# amrvio {name}: T_world_body, the pose of the IMU body frame (EuRoC's ground-truth frame) "
+    "in the gravity-aligned metric world (z up, yaw and origin of the visual-inertial "
+    "initialisation), per frame at its image time; LOST frames are left out (their status is in "
+    "health.csv)")
+
+
 def pose_rows(stamps_s: NDArray[np.float64], T_world_cam: NDArray[np.float64],
               keep: Sequence[bool]) -> tuple[NDArray[np.int64], Trajectory]:
     """The frames to write (``keep`` and a finite pose) and their trajectory."""
@@ -212,13 +233,15 @@ def write_outputs(out: PipelineOutput, out_dir: Path, config: PipelineConfig | N
     records = out.records
     stamps_s = out.stamps_ns.astype(np.float64) * 1e-9
     final_ok = [r.status is not PoseStatus.LOST for r in records]
-    idx, traj = pose_rows(stamps_s, out.T_world_cam, final_ok)
+    comment = TRAJECTORY_COMMENT if out.body is None else BODY_TRAJECTORY_COMMENT
+    idx, traj = pose_rows(stamps_s, out.T_world_cam if out.body is None else out.body.T_world_body,
+                          final_ok)
     with replacing(out_dir / "trajectory.tum") as tmp:
-        write_tum(tmp, traj, TRAJECTORY_COMMENT.format(name="trajectory.tum"))
+        write_tum(tmp, traj, comment.format(name="trajectory.tum"))
     kf = np.isin(idx, out.keyframe_indices)
     with replacing(out_dir / "keyframes.tum") as tmp:
         write_tum(tmp, traj.select(np.flatnonzero(kf)),
-                  TRAJECTORY_COMMENT.format(name="keyframes.tum") + "; keyframes only")
+                  comment.format(name="keyframes.tum") + "; VO keyframes only")
     statuses = online_status if online_status is not None else [r.status for r in records]
     online = [(i, r.pose_online) for i, r in enumerate(records)
               if r.pose_online is not None and statuses[i] is not PoseStatus.LOST]
@@ -341,6 +364,6 @@ def _write_ply(path: Path, pts: np.ndarray) -> None:
     path.write_text(head + body, encoding="ascii")
 
 
-__all__ = ["FRAME_COLUMNS", "TRAJECTORY_COMMENT", "FrameSink", "diagnose", "finite_json",
-           "frame_row", "pose_rows", "replacing", "run_pipeline", "summarise", "write_advice",
+__all__ = ["BODY_TRAJECTORY_COMMENT", "FRAME_COLUMNS", "TRAJECTORY_COMMENT", "FrameSink", "diagnose", "finite_json",
+           "frame_row", "imu_setup", "pose_rows", "replacing", "run_pipeline", "summarise", "write_advice",
            "write_health", "write_json", "write_outputs"]

@@ -32,6 +32,7 @@ from amrvio.pipeline.run import (
     write_json,
     write_outputs,
 )
+from amrvio.pipeline.vio_report import VIO_COLUMNS
 
 RUN_OUTPUTS: tuple[str, ...] = (
     "trajectory.tum", "trajectory_online.tum", "keyframes.tum", "map.ply", "health.csv",
@@ -103,11 +104,15 @@ class RunWriter:
             if rec.diagnostics is not None:
                 hcols, _ = health_rows([rec.diagnostics])
                 cols = hcols + FRAME_COLUMNS[2:]
+            if rec.estimator.vio is not None:
+                cols += VIO_COLUMNS
             self._health = (self.out_dir / "health.csv").open("w", newline="", encoding="utf-8")
             self._health_csv = csv.DictWriter(self._health, fieldnames=cols, extrasaction="ignore")
             self._health_csv.writeheader()
         if rec.diagnostics is not None:
             row.update(rec.diagnostics.as_row())
+        if rec.estimator.vio is not None:
+            row.update(rec.estimator.vio.health_fields())
         self._health_csv.writerow(row)
         if self._health is not None:
             self._health.flush()

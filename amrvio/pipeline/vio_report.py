@@ -1,0 +1,208 @@
+"""Values of the visual-inertial stage (:class:`amrvio.pipeline.vio_stage.VioStage`): its
+configuration, its per-frame input, and what it reports for one frame (:class:`VioReport`, with its
+columns in ``health.csv``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+from numpy.typing import NDArray
+
+from amrvio.errors import ConfigError
+from amrvio.estimator.vi_init import ViInitResult
+from amrvio.estimator.vio_checks import ConsistencyReport
+from amrvio.estimator.vio_types import VioEstimate
+from amrvio.frontend.tracker import TrackOutcome
+from amrvio.frontend.tracks import TrackSet
+from amrvio.imu.static_init import StaticInitResult
+from amrvio.types.lie import SE3
+from amrvio.types.sensors import ImuData, ImuNoise, WheelData
+
+F64 = NDArray[np.float64]
+I64 = NDArray[np.int64]
+
+
+@dataclass(frozen=True, slots=True)
+class VioStageConfig:
+    """``enabled``: run VIO when the recording has an IMU; ``imu_noise_scale``: factor on the
+    IMU's noise densities and random walks (a vibrating platform is noisier than its datasheet);
+    ``window_keyframes``: keyframes in the fixed-lag smoother; ``static_init_s``: still this long
+    from the start starts the smoother at rest (0: never); ``min_init_keyframes`` /
+    ``max_init_window_s``: the VO keyframes the dynamic initialisation needs, and the longest span
+    it uses; ``min_tracks``: fewer tracks than this and a frame is bridged by the IMU;
+    ``reinit_on_check_failure``: re-initialise when a consistency check fails;
+    ``max_init_scale_rel_std`` / ``max_init_gravity_std_deg``: the dynamic initialisation's scale
+    std / scale and gravity-direction std it accepts (looser than the initialiser's own gates for
+    a lone window: the smoother refines both afterwards); ``wheel_sigma_m_s``: standard deviation
+    of the wheel-odometry velocity (forward speed, and the zero sideways and vertical speed of a
+    ground robot) when the recording has wheel odometry (0, the default: not used; a wheel file
+    does not say the platform is a ground robot; ``amrvio run --wheels`` sets 0.05);
+    ``max_smear_px``: a frame whose gyro-predicted smear is larger is bridged by the IMU (its
+    tracks are not trusted), whatever the blur gate said."""
+
+    enabled: bool = True
+    imu_noise_scale: float = 1.0
+    window_keyframes: int = 10
+    static_init_s: float = 0.4
+    min_init_keyframes: int = 8
+    max_init_window_s: float = 10.0
+    min_tracks: int = 10
+    reinit_on_check_failure: bool = True
+    max_init_scale_rel_std: float = 0.015
+    max_init_gravity_std_deg: float = 1.0
+    wheel_sigma_m_s: float = 0.0
+    max_smear_px: float = 8.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.imu_noise_scale) and self.imu_noise_scale > 0):
+            raise ConfigError(f"vio.imu_noise_scale must be > 0, got {self.imu_noise_scale}")
+        if not 2 <= self.window_keyframes <= 200:
+            raise ConfigError(f"vio.window_keyframes must be in [2, 200], got {self.window_keyframes}")
+        if not (np.isfinite(self.static_init_s) and self.static_init_s >= 0):
+            raise ConfigError(f"vio.static_init_s must be >= 0, got {self.static_init_s}")
+        if not 3 <= self.min_init_keyframes <= 1000:
+            raise ConfigError(f"vio.min_init_keyframes must be in [3, 1000], got {self.min_init_keyframes}")
+        if not (np.isfinite(self.max_init_window_s) and self.max_init_window_s >= 1.0):
+            raise ConfigError(f"vio.max_init_window_s must be >= 1 s, got {self.max_init_window_s}")
+        if not 0 < self.max_init_scale_rel_std < 1:
+            raise ConfigError(f"vio.max_init_scale_rel_std must be in (0, 1), got {self.max_init_scale_rel_std}")
+        if not 0 < self.max_init_gravity_std_deg < 90:
+            raise ConfigError(f"vio.max_init_gravity_std_deg must be in (0, 90), got {self.max_init_gravity_std_deg}")
+        if not (np.isfinite(self.wheel_sigma_m_s) and self.wheel_sigma_m_s >= 0):
+            raise ConfigError(f"vio.wheel_sigma_m_s must be >= 0, got {self.wheel_sigma_m_s}")
+        if not self.max_smear_px > 0:
+            raise ConfigError(f"vio.max_smear_px must be > 0, got {self.max_smear_px}")
+        if self.min_tracks < 0:
+            raise ConfigError(f"vio.min_tracks must be >= 0, got {self.min_tracks}")
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class VioFrameInput:
+    """One frame for the stage: ``t_ns``; ``imu``: samples since the previous frame (may overlap);
+    ``usable``: the tracks were tracked into this image (not blurred, dropped or repeated);
+    ``ids`` (N,) / ``uv`` (N, 2): the tracks, undistorted pinhole pixels; ``vo_keyframe``:
+    (segment, keyframe id) when the VO made this frame a keyframe; ``smear_px``: the motion
+    smear the gyro predicts for the exposure (the diagnostics'; NaN when unknown)."""
+
+    t_ns: int
+    imu: ImuData | None
+    usable: bool
+    ids: I64
+    uv: F64
+    vo_keyframe: tuple[int, int] | None = None
+    smear_px: float = float("nan")
+
+
+#: tracker outcomes whose tracks were not moved into the frame's image
+UNTRACKED = (TrackOutcome.SKIPPED_BLURRED, TrackOutcome.PREDICTED, TrackOutcome.TRACKED_BLURRED,
+             TrackOutcome.REPEATED)
+
+
+def vio_input(t_ns: int, imu: ImuData | None, outcome: TrackOutcome, tracks: TrackSet,
+              vo_keyframe: tuple[int, int] | None, smear_px: float | None = None) -> VioFrameInput:
+    """The stage's input from the tracker's outcome and its live tracks."""
+    return VioFrameInput(t_ns, imu, outcome not in UNTRACKED, tracks.ids.copy(), tracks.pts.copy(),
+                         vo_keyframe, float("nan") if smear_px is None else float(smear_px))
+
+
+@dataclass(frozen=True, slots=True)
+class ImuSetup:
+    """What the VIO stage needs beyond the camera: the IMU's noise (Kalibr densities), the camera
+    pose in the IMU body frame, and the wheel odometry of a ground robot (forward = body x), if
+    any."""
+
+    noise: ImuNoise
+    T_body_cam: SE3
+    wheel: WheelData | None = None
+
+
+
+
+class VioPhase(Enum):
+    """Where the visual-inertial stage is at a frame.
+
+    VO: not initialised yet (the pose is the VO's, up to scale); VIO: the smoother's estimate of a
+    frame given to it; BRIDGED: an IMU prediction for a frame the smoother did not get (blurred,
+    dropped, lost or repeated); NO_IMU: the IMU does not cover the frame."""
+
+    VO = "vo"
+    VIO = "vio"
+    BRIDGED = "bridged"
+    NO_IMU = "no_imu"
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class VioReport:
+    """The stage's report of one frame. ``estimate``: the body state (None before the
+    initialisation); ``keyframe``: the smoother kept the frame as a keyframe; ``vi_init``: the
+    dynamic initialisation attempted at this frame (None when none was); ``static``: the static
+    initialisation decided at this frame; ``last_init``: the latest dynamic attempt (carried from
+    frame to frame, for the health record); ``checks``: the consistency checks of the update;
+    ``init_kind``: how the running estimate was initialised ("static", "dynamic", "reinit" or "")."""
+
+    phase: VioPhase
+    estimate: VioEstimate | None = None
+    keyframe: bool = False
+    vi_init: ViInitResult | None = None
+    static: StaticInitResult | None = None
+    last_init: ViInitResult | None = None
+    checks: ConsistencyReport | None = None
+    init_kind: str = ""
+
+    @property
+    def bridged(self) -> bool:
+        return self.phase is VioPhase.BRIDGED
+
+    def health_fields(self) -> dict[str, str]:
+        """The ``vio_*`` / ``vi_init_*`` columns of health.csv (see :data:`VIO_COLUMNS`); empty
+        where not known."""
+        est = self.estimate
+        st = est.state if est is not None and est.ok else None
+        out = dict.fromkeys(VIO_COLUMNS, "")
+        out["vio_phase"] = self.phase.value
+        out["vio_init_kind"] = self.init_kind
+        if st is not None and est is not None:
+            v = np.asarray(st.v_world_m_s)
+            out.update(vio_vx_m_s=_num(v[0], ".4f"), vio_vy_m_s=_num(v[1], ".4f"),
+                       vio_vz_m_s=_num(v[2], ".4f"), vio_speed_m_s=_num(float(np.linalg.norm(v)), ".4f"),
+                       vio_gyro_bias_norm_rad_s=_num(float(np.linalg.norm(st.bias.gyro_rad_s)), ".6f"),
+                       vio_accel_bias_norm_m_s2=_num(float(np.linalg.norm(st.bias.accel_m_s2)), ".5f"))
+            if est.position_sigma_m is not None:
+                out["vio_position_sigma_m"] = _num(float(np.linalg.norm(est.position_sigma_m)), ".5f")
+            if est.velocity_sigma_m_s is not None:
+                out["vio_velocity_sigma_m_s"] = _num(float(np.linalg.norm(est.velocity_sigma_m_s)), ".5f")
+        if self.checks is not None:
+            out["vio_checks"] = self.checks.summary()
+        if self.static is not None:
+            out["vio_static_init"] = self.static.status.value
+        init = self.last_init
+        if init is not None:
+            f = init.health_fields()
+            out["vi_init_status"] = str(f["vi_init_status"])
+            for key in ("vi_init_scale", "vi_init_scale_std", "vi_init_gravity_norm_residual_m_s2",
+                        "vi_init_gravity_std_deg"):
+                val = f[key]
+                out[key] = _num(float(val), ".5f") if isinstance(val, float) else ""
+        return out
+
+
+VIO_COLUMNS = ["vio_phase", "vio_init_kind", "vio_vx_m_s", "vio_vy_m_s", "vio_vz_m_s", "vio_speed_m_s",
+               "vio_gyro_bias_norm_rad_s", "vio_accel_bias_norm_m_s2", "vio_position_sigma_m",
+               "vio_velocity_sigma_m_s", "vio_checks", "vio_static_init", "vi_init_status", "vi_init_scale",
+               "vi_init_scale_std", "vi_init_gravity_norm_residual_m_s2", "vi_init_gravity_std_deg"]
+"""The visual-inertial columns of health.csv: phase, how it was initialised, velocity (world, m/s),
+bias norms, position and velocity sigmas (norm of the per-axis values), the consistency checks,
+the static initialisation's verdict, and the latest dynamic initialisation's status, scale, scale
+std, gravity-norm residual and gravity-direction std."""
+
+
+def _num(v: float, fmt: str) -> str:
+    return format(v, fmt) if math.isfinite(v) else ""
+
+
+__all__ = ["UNTRACKED", "VIO_COLUMNS", "ImuSetup", "VioFrameInput", "VioPhase", "VioReport", "VioStageConfig",
+           "vio_input"]

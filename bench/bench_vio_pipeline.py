@@ -1,0 +1,241 @@
+"""Visual-inertial odometry end to end (issue 10's "done when" figures), each run through
+``amrvio.run`` (as ``amrvio run DATASET --out DIR``) on a recording with an IMU:
+
+- simulator replay of the real EuRoC V1_01 flight with its recorded IMU (``amrvio simulate
+  --motion replay``, 376x240, the first 30 s): frames posed, SE3 ATE of the body, scale error;
+- real EuRoC MH_01 images (hand-held part) with an IMU synthesised from the ground truth at the
+  ADIS16448 densities of its calib/imu0_sensor.yaml (amrvio.sim.imu_from_gt): same figures;
+- simulator forward-stop-turn (corridor, 376x240, 8 s): the time from the start of the drive until
+  the causal metric scale stays within 2 % (scale of the VIO's online positions from the start to
+  each frame against the ground truth, rotation about gravity aligned);
+- blur bursts (forward-stop-turn with two 0.5 s yaw oscillations of 20 and 30 px of smear): every
+  frame posed (IMU bridging), and the ATE against the same run rendered without blur;
+- constant-velocity corridor: the IMU-only initialiser's statuses, and the scale error with the
+  wheel odometry (``--wheels``).
+
+Accuracy: ``eval.json`` of the run (SE3 and Sim3 alignment of the body poses); on a straight path,
+where Umeyama's rotation is undefined, the alignment about gravity (``yaw_aligned``).
+
+Run alone: ``.venv/bin/python -m bench.bench_vio_pipeline [--quick]``.
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from amrvio.app.run import RunResult
+from amrvio.app.run import run as run_recording
+from amrvio.io.calib import read_euroc_imu
+from amrvio.io.dataset import open_dataset
+from amrvio.pipeline.records import PoseStatus
+from amrvio.pipeline.run_eval import yaw_alignment
+from amrvio.pipeline.threads import limit_native_threads
+from amrvio.sim.imu_from_gt import write_with_synthetic_imu
+from amrvio.sim.simulate import SimConfig, simulate
+
+DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
+V101 = DATA / "euroc_V1_01_easy_first95" / "mav0"
+MH01 = DATA / "euroc_MH_01_handheld_0000-0299"
+Row = dict[str, object]
+W, H = 376, 240
+DRIVE_START_S = 0.5  # forward-stop-turn rests 0.5 s, then drives
+
+
+def _posed(res: RunResult) -> tuple[int, int, int]:
+    recs = res.records
+    lost = sum(r.status is PoseStatus.LOST for r in recs)
+    bridged = sum(r.status is PoseStatus.BRIDGED for r in recs)
+    return len(recs) - lost, len(recs), bridged
+
+
+def _run(data: Path, out: Path) -> tuple[RunResult, float]:
+    t0 = time.perf_counter()
+    res = run_recording(str(data), out=out, report=False, force=True)
+    return res, time.perf_counter() - t0
+
+
+def _accuracy_rows(tag: str, res: RunResult, secs: float, ate_max: float, scale_max: float) -> list[Row]:
+    posed, n, bridged = _posed(res)
+    ev: dict[str, Any] = res.eval_summary or {}
+    ate = ev.get("ate_metric_m")
+    scale = ev.get("scale_error_pct")
+    note = (f"{n} frames, {bridged} bridged; Sim3 ATE {ev.get('ate_sim3_m') or float('nan'):.4f} m of "
+            f"{ev.get('path_length_m') or float('nan'):.2f} m; {secs:.0f} s wall; "
+            f"{sum(e[1].startswith('vio_reinit') for e in res.summary['events'])} re-inits")
+    return [
+        {"name": f"{tag}: frames posed", "value": 100.0 * posed / max(n, 1), "unit": "%", "note": note,
+         "target": "100 %", "pass": posed == n},
+        {"name": f"{tag}: SE3 ATE (body)", "value": float(ate) if ate is not None else float("nan"), "unit": "m",
+         "note": note, "target": f"<= {ate_max} m", "pass": ate is not None and ate <= ate_max},
+        {"name": f"{tag}: scale error", "value": float(scale) if scale is not None else float("nan"), "unit": "%",
+         "note": "Sim3 scale of the body trajectory against the ground truth", "target": f"<= {scale_max} %",
+         "pass": scale is not None and scale <= scale_max},
+    ]
+
+
+def replay(work: Path, quick: bool) -> list[Row]:
+    seq = work / "replay"
+    seconds = 15.0 if quick else 30.0
+    simulate(SimConfig(motion="replay", scene="room", seconds=seconds, trajectory=str(
+        V101 / "state_groundtruth_estimate0" / "data.csv"), imu_csv=str(V101 / "imu0" / "data.csv"),
+        cam_extrinsic=str(V101 / "cam0" / "sensor.yaml"), width=W, height=H), seq, force=True)
+    res, secs = _run(seq, work / "replay_out")
+    return _accuracy_rows(f"VIO sim replay V1_01 {seconds:.0f} s 376x240 (recorded IMU)", res, secs, 0.05, 1.0)
+
+
+def mh01(work: Path) -> list[Row]:
+    seq = work / "mh01"
+    noise = read_euroc_imu(MH01 / "calib" / "imu0_sensor.yaml")
+    write_with_synthetic_imu(MH01, MH01 / "gt" / "groundtruth_body_tum.txt", seq, noise, seed=0)
+    res, secs = _run(seq, work / "mh01_out")
+    return _accuracy_rows("VIO EuRoC MH_01 handheld 300 frames (IMU from GT)", res, secs, 0.05, 2.0)
+
+
+def _causal_scale_time(res: RunResult, data: Path) -> tuple[float, float]:
+    """(seconds after the drive starts when the causal scale is within 2 % from then on, the
+    final causal scale error %)."""
+    gt = open_dataset(str(data)).groundtruth
+    if gt is None:
+        return float("nan"), float("nan")
+    rows = [(r.t_ns, r.estimator.vio.estimate.state.T_world_body.t) for r in res.records
+            if r.estimator.vio is not None and r.estimator.vio.estimate is not None
+            and r.estimator.vio.estimate.state is not None]
+    if len(rows) < 10:
+        return float("nan"), float("nan")
+    t = np.array([x[0] for x in rows], dtype=np.float64) * 1e-9
+    p = np.array([x[1] for x in rows])
+    g = gt.interpolated_at(t).positions_m
+    start = float(gt.stamps_s[0]) + DRIVE_START_S
+    errs = np.full(len(t), np.inf)
+    for k in range(len(t)):
+        if np.linalg.norm(g[k] - g[0]) > 0.2:  # a scale needs some path
+            errs[k] = yaw_alignment(p[: k + 1], g[: k + 1])["scale_error_pct"]
+    bad = np.flatnonzero(errs > 2.0)
+    k_ok = int(bad[-1]) + 1 if bad.size else 0
+    if k_ok >= len(t):
+        return float("inf"), float(errs[-1])
+    return float(t[k_ok] - start), float(errs[-1])
+
+
+def forward_stop_turn(work: Path) -> list[Row]:
+    seq = work / "fst"
+    simulate(SimConfig(motion="forward-stop-turn", seconds=8.0, width=W, height=H), seq, force=True)
+    res, secs = _run(seq, work / "fst_out")
+    after, final = _causal_scale_time(res, seq)
+    ev: dict[str, Any] = res.eval_summary or {}
+    ya = ev.get("yaw_aligned") or {}
+    note = (f"causal scale error at the end {final:.2f} %; final trajectory yaw-aligned ATE "
+            f"{ya.get('ate_m', float('nan')):.4f} m, scale error {ya.get('scale_error_pct', float('nan')):.2f} %; "
+            f"{secs:.0f} s wall")
+    posed, n, _ = _posed(res)
+    return [
+        {"name": "VIO sim forward-stop-turn 8 s: scale within 2 % after the drive starts", "value": after,
+         "unit": "s", "note": note, "target": "<= 3 s", "pass": bool(after <= 3.0)},
+        {"name": "VIO sim forward-stop-turn 8 s: frames posed", "value": 100.0 * posed / max(n, 1), "unit": "%",
+         "note": note, "target": "100 %", "pass": posed == n},
+    ]
+
+
+def blur_bursts(work: Path) -> list[Row]:
+    # smear = f |omega| T = 0.61 * 376 px * omega * 12 ms: 8 rad/s -> 22 px, 12 rad/s -> 33 px
+    bursts = "2.5:0.5:8,5.5:0.5:12"
+    out: dict[bool, tuple[RunResult, float]] = {}
+    for blur in (True, False):
+        seq = work / f"burst_{'blur' if blur else 'sharp'}"
+        simulate(SimConfig(motion="forward-stop-turn", seconds=8.0, blur_bursts=bursts, blur=blur, width=W,
+                           height=H), seq, force=True)
+        out[blur] = _run(seq, work / f"{seq.name}_out")
+
+    def ate(res: RunResult) -> float:
+        ev: dict[str, Any] = res.eval_summary or {}
+        ya = ev.get("yaw_aligned") or {}
+        return float(ev.get("ate_metric_m") or ya.get("ate_m") or float("nan"))
+
+    a_blur, a_sharp = ate(out[True][0]), ate(out[False][0])
+    posed, n, bridged = _posed(out[True][0])
+    blurred = sum(r.blurred for r in out[True][0].records)
+    growth = 100.0 * (a_blur / a_sharp - 1.0)
+    note = (f"ATE {a_blur:.4f} m with blur, {a_sharp:.4f} m without; {blurred} frames gated as blurred, "
+            f"{bridged} bridged by the IMU")
+    return [
+        {"name": "VIO blur bursts 2 x 0.5 s (22, 33 px): frames posed", "value": 100.0 * posed / max(n, 1),
+         "unit": "%", "note": note, "target": "100 %", "pass": posed == n},
+        {"name": "VIO blur bursts: ATE growth over the same run without blur", "value": growth, "unit": "%",
+         "note": note, "target": "<= 20 %", "pass": bool(growth <= 20.0)},
+    ]
+
+
+def constant_velocity(work: Path) -> list[Row]:
+    """The corridor at constant velocity: the IMU alone cannot give the scale (the initialiser
+    must say so); with the wheels (``--wheels``) the scale is metric."""
+    import dataclasses
+
+    from amrvio.config import PipelineConfig
+
+    seq = work / "cv"
+    simulate(SimConfig(motion="constant-velocity", seconds=8.0, width=W, height=H), seq, force=True)
+    imu_only, secs_imu = _run(seq, work / "cv_imu")
+    statuses = sorted({r.estimator.vio.vi_init.status.value for r in imu_only.records
+                       if r.estimator.vio is not None and r.estimator.vio.vi_init is not None})
+    cfg = PipelineConfig()
+    cfg = dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, wheel_sigma_m_s=0.05))
+    t0 = time.perf_counter()
+    wheels = run_recording(str(seq), cfg, out=work / "cv_wheels", report=False, force=True)
+    secs = time.perf_counter() - t0
+    ev: dict[str, Any] = wheels.eval_summary or {}
+    ya = ev.get("yaw_aligned") or {}
+    scale = float(ya.get("scale_error_pct", float("nan")))
+    posed, n, _ = _posed(wheels)
+    wheel_init = [e[1] for e in wheels.summary["events"] if e[1].startswith("vi_init_wheel")]
+    note = (f"IMU-only initialiser statuses {statuses} ({secs_imu:.0f} s); with wheels: {posed}/{n} posed, "
+            f"yaw-aligned ATE {ya.get('ate_m', float('nan')):.4f} m, first wheel init "
+            f"{wheel_init[0] if wheel_init else 'none'}; the simulated wheels read 2 % long; {secs:.0f} s")
+    return [
+        {"name": "VIO sim constant-velocity 8 s: IMU initialiser reports insufficient_excitation",
+         "value": float("insufficient_excitation" in statuses), "unit": "", "note": note,
+         "target": "reported", "pass": "insufficient_excitation" in statuses and "ok" not in statuses},
+        {"name": "VIO sim constant-velocity 8 s with wheels: scale error", "value": scale, "unit": "%",
+         "note": note, "target": "<= 2 %", "pass": bool(scale <= 2.0)},
+    ]
+
+
+def run_rows(quick: bool) -> list[Row]:
+    limit_native_threads(1)  # as `amrvio run` does
+    rows: list[Row] = []
+    with tempfile.TemporaryDirectory(prefix="amrvio_bench_vio_") as tmp:
+        work = Path(tmp)
+        parts = [lambda: forward_stop_turn(work), lambda: blur_bursts(work), lambda: constant_velocity(work)]
+        if DATA.is_dir():
+            parts = [lambda: replay(work, quick), lambda: mh01(work), *parts]
+        for part in parts:
+            for r in part():
+                rows.append(r)
+                print(f"{r['name']:<70} {float(r['value']):>9.4f} {r['unit']:<3} "  # type: ignore[arg-type]
+                      f"{'PASS' if r['pass'] else 'FAIL'} [{r['target']}] {r['note']}", flush=True)
+    return rows
+
+
+def run(quick: bool) -> list[Row]:
+    return run_rows(quick)
+
+
+if __name__ == "__main__":
+    only = [a for a in sys.argv[1:] if not a.startswith("--")]
+    if only:  # e.g. `python -m bench.bench_vio_pipeline fst`: one scenario
+        limit_native_threads(1)
+        with tempfile.TemporaryDirectory(prefix="amrvio_bench_vio_") as tmp:
+            w = Path(tmp)
+            table = {"replay": lambda: replay(w, "--quick" in sys.argv), "mh01": lambda: mh01(w),
+                     "fst": lambda: forward_stop_turn(w), "blur": lambda: blur_bursts(w),
+                     "cv": lambda: constant_velocity(w)}
+            for name in only:
+                for r in table[name]():
+                    print(r, flush=True)
+    else:
+        run_rows("--quick" in sys.argv)

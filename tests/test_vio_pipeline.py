@@ -1,0 +1,112 @@
+"""Visual-inertial odometry as a configuration of the pipeline (issue 10), end to end on a short
+simulated sequence (forward-stop-turn: 0.5 s at rest, then a drive), against the simulator's
+ground truth: every frame posed in the body frame, metric ATE, the body-frame trajectory file,
+the VIO columns of health.csv, and ``--no-imu`` giving the VO path."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from amrvio.app.run import RunResult, run
+from amrvio.config import PipelineConfig
+from amrvio.io.dataset import open_dataset
+from amrvio.io.trajectory import read_trajectory
+from amrvio.pipeline.records import PoseStatus
+from amrvio.pipeline.run_eval import yaw_alignment
+from amrvio.pipeline.vio_report import VIO_COLUMNS, VioPhase
+from amrvio.sim.simulate import SimConfig, simulate
+
+
+@pytest.fixture(scope="module")
+def sim_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("vio_sim") / "seq"
+    simulate(SimConfig(motion="forward-stop-turn", seconds=4.5, width=376, height=240, fps=10.0, seed=3), out)
+    return out
+
+
+@pytest.fixture(scope="module")
+def vio_run(sim_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> RunResult:
+    return run(str(sim_dir), out=tmp_path_factory.mktemp("vio_out"), report=False)
+
+
+def test_every_frame_posed_in_the_body_frame_with_metric_ate(vio_run: RunResult, sim_dir: Path) -> None:
+    out = vio_run.output
+    assert out.body is not None
+    assert all(r.status is not PoseStatus.LOST for r in out.records)
+    assert all(r.estimator.vio is not None for r in out.records)
+    # the sequence starts at rest: the static initialisation starts the smoother in the first frames
+    assert out.body.init_frame <= 5
+    assert any(r.estimator.vio is not None and r.estimator.vio.static is not None
+               and r.estimator.vio.static.ok for r in out.records)
+    est = read_trajectory(vio_run.out_dir / "trajectory.tum" if vio_run.out_dir else sim_dir)
+    assert len(est) == len(out.records)
+    gt = open_dataset(str(sim_dir)).groundtruth
+    assert gt is not None
+    al = yaw_alignment(est.positions_m, gt.interpolated_at(est.stamps_s).positions_m)
+    # about 2 m of driving, no turn yet; the VO alone has no metric scale at all
+    assert al["ate_m"] < 0.05, al
+    assert al["scale_error_pct"] < 3.0, al
+    ev = vio_run.eval_summary
+    assert ev is not None and ev["frame"] == "body" and ev["metric_scale_source"] == "imu"
+    assert ev["yaw_aligned"]["ate_m"] == pytest.approx(al["ate_m"], abs=1e-6)
+
+
+def test_trajectory_file_names_the_body_frame_with_eight_columns(vio_run: RunResult) -> None:
+    assert vio_run.out_dir is not None
+    lines = (vio_run.out_dir / "trajectory.tum").read_text(encoding="utf-8").splitlines()
+    assert "T_world_body" in lines[0] and "IMU body frame" in lines[0]
+    rows = [ln.split() for ln in lines if not ln.startswith("#")]
+    assert rows and all(len(r) == 8 for r in rows)
+
+
+def test_health_csv_has_the_vio_columns(vio_run: RunResult) -> None:
+    assert vio_run.out_dir is not None
+    with (vio_run.out_dir / "health.csv").open(encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert set(VIO_COLUMNS) <= set(rows[0])
+    phases = [r["vio_phase"] for r in rows]
+    first = next(i for i, p in enumerate(phases) if p == VioPhase.VIO.value)
+    # VO until the static initialisation (0.4 s of rest), then the smoother on every frame
+    assert first <= 5 and set(phases[:first]) <= {VioPhase.VO.value}
+    assert set(phases[first:]) <= {VioPhase.VIO.value, VioPhase.BRIDGED.value}
+    running = rows[first:]
+    speeds = np.array([float(r["vio_speed_m_s"]) for r in running if r["vio_speed_m_s"]])
+    # the robot drives at up to about 0.8 m/s after resting
+    assert speeds.max() > 0.2 and speeds.max() < 1.5
+    assert all(r["vio_init_kind"] in ("static", "dynamic", "reinit") for r in running)
+    events = (vio_run.out_dir / "events.jsonl").read_text(encoding="utf-8")
+    assert '"type":"static_init"' in events
+
+
+def test_no_imu_gives_the_vo_path(sim_dir: Path, tmp_path: Path) -> None:
+    cfg = PipelineConfig()
+    cfg = dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, enabled=False))
+    res = run(str(sim_dir), cfg, out=tmp_path / "vo", report=False, max_frames=25)
+    assert res.output.body is None
+    assert all(r.estimator.vio is None for r in res.records)
+    head = (tmp_path / "vo" / "trajectory.tum").read_text(encoding="utf-8").splitlines()[0]
+    assert "T_world_cam" in head
+    with (tmp_path / "vo" / "health.csv").open(encoding="utf-8") as fh:
+        assert "vio_phase" not in next(csv.reader(fh))
+
+
+def test_yaw_alignment_recovers_a_known_rotation_about_gravity_scale_and_offset() -> None:
+    rng = np.random.default_rng(0)
+    gt = np.cumsum(rng.normal(size=(50, 3)) * [0.3, 0.3, 0.05], axis=0)
+    yaw, s, t = 0.7, 1.25, np.array([3.0, -1.0, 0.5])
+    c, sn = np.cos(yaw), np.sin(yaw)
+    Rz = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
+    est = ((gt - t) @ Rz) / s  # gt = s Rz est + t
+    al = yaw_alignment(est, gt)
+    assert al["yaw_deg"] == pytest.approx(np.degrees(yaw), abs=1e-6)
+    assert al["scale"] == pytest.approx(s, rel=1e-9) and al["ate_scaled_m"] < 1e-9
+    assert al["ate_m"] > 0.01  # without the scale the fit is off
+    # a straight line, where Umeyama's rotation is undefined, still gives yaw and scale
+    line = np.stack([np.linspace(0, 2, 20), np.zeros(20), np.zeros(20)], axis=1)
+    al = yaw_alignment(line @ Rz.T * 0.5, line)
+    assert al["scale"] == pytest.approx(2.0) and al["yaw_deg"] == pytest.approx(-np.degrees(yaw), abs=1e-6)
