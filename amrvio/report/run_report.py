@@ -24,7 +24,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from amrvio.pipeline.events import CAUSES, flagged_ranges
-from amrvio.pipeline.records import FrameRecord, PoseStatus
+from amrvio.pipeline.records import FrameRecord
+from amrvio.pipeline.run_eval import estimate_trajectory
 from amrvio.report.plots import top_view_axes
 
 if TYPE_CHECKING:
@@ -146,8 +147,8 @@ def plot_top_view(data: ReportInput) -> str:
         ax.plot(gt[:1, a], gt[:1, b], "ko", ms=4)
         title = f"top view: ATE {res.ate.rmse:.3f} m (Sim3) over {res.path_length_m:.1f} m"
     else:
-        keep = [i for i, r in enumerate(out.records) if r.status is not PoseStatus.LOST]
-        p = out.T_world_cam[keep, :3, 3] if len(out.T_world_cam) and keep else np.zeros((0, 3))
+        # the poses of trajectory.tum (with VIO: the body's, gravity-aligned and metric)
+        p = estimate_trajectory(out).positions_m
         p = p[np.all(np.isfinite(p), axis=1)]
         a, b = top_view_axes(p)
         if len(p):
@@ -155,8 +156,14 @@ def plot_top_view(data: ReportInput) -> str:
             ax.plot(p[:1, a], p[:1, b], "ko", ms=4, label="start")
         else:
             _no_data(ax, "no posed frame")
-        title = "top view (no ground truth)"
-    if len(out.map_points) and res is None:
+        yaw = (data.eval_summary or {}).get("yaw_aligned")
+        if isinstance(yaw, dict) and "ate_m" in yaw:
+            title = (f"top view: ATE {yaw['ate_m']:.3f} m aligned about gravity (a straight path "
+                     "has no Sim3 alignment)")
+        else:
+            title = "top view (no ground truth)" if data.eval_summary is None else \
+                "top view (not aligned to the ground truth)"
+    if len(out.map_points) and res is None and out.body is None:
         m = out.map_points
         ax.plot(m[:, a], m[:, b], ",", color="0.6", zorder=0, label="map points")
     names = "xyz"
@@ -359,8 +366,9 @@ def figures_rows(data: ReportInput) -> list[tuple[str, Any]]:
         ("state", s.get("state", "")),
         ("frames processed", n),
         ("frames in trajectory.tum", s.get("n_in_trajectory")),
-        ("tracked / interpolated / lost",
-         f"{counts.get('tracked', 0)} / {counts.get('interpolated', 0)} / {counts.get('lost', 0)}"),
+        ("tracked / bridged by the IMU / interpolated / lost",
+         f"{counts.get('tracked', 0)} / {counts.get('bridged', 0)} / "
+         f"{counts.get('interpolated', 0)} / {counts.get('lost', 0)}"),
         ("frames with a pose [%]", 100.0 * s.get("n_in_trajectory", 0) / n if n else None),
         ("images skipped (unusable)", s.get("n_skipped", 0)),
         ("keyframes", s.get("n_keyframes")),
@@ -376,8 +384,12 @@ def figures_rows(data: ReportInput) -> list[tuple[str, Any]]:
                      f"{len(r)} ({sum(b - a + 1 for a, b in r)} frames)"))
     ev = data.eval_summary
     if ev is not None:
+        yaw = ev.get("yaw_aligned")
         if ev.get("error"):
-            rows.append(("evaluation", f"not possible: {ev['error']}"))
+            rows.append(("evaluation (Sim3/SE3)", f"not possible: {ev['error']}"))
+            if isinstance(yaw, dict):
+                rows += [("ATE rmse, aligned about gravity, metric [m]", yaw.get("ate_m")),
+                         ("scale error, aligned about gravity [%]", yaw.get("scale_error_pct"))]
         else:
             rows += [("ground-truth path [m]", ev.get("path_length_m")),
                      ("ATE rmse, Sim3 aligned [m]", ev.get("ate_sim3_m")),
