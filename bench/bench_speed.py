@@ -71,6 +71,7 @@ STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("PnP", ("pnp",)),
     ("keyframe work", ("anchor", "detect", "triangulate", "cull", "reloc_db", "scale")),
     ("local BA", ("ba",)),
+    ("VIO back-end", ("vio",)),
     ("init + relocalisation", ("init", "reloc")),
     ("outputs", ("outputs",)),
 )
@@ -152,8 +153,11 @@ def accuracy(out: PipelineOutput, online_status: list[PoseStatus],
 
 
 def timed_run(ds: Dataset, gt: Trajectory, cfg: PipelineConfig | None = None) -> RunFigures:
-    """One run of ``ds`` as `amrvio run` does it, timed per stage (CPU)."""
-    cfg = cfg or PipelineConfig()
+    """One run of ``ds`` as `amrvio run --no-imu` does it (issue 11's mono VO rows; the simulated
+    recordings carry an IMU), timed per stage (CPU)."""
+    if cfg is None:
+        base = PipelineConfig()
+        cfg = dataclasses.replace(base, vio=dataclasses.replace(base.vio, enabled=False))
     acc: dict[str, float] = {}
     ds = _timed_frames(ds, acc)
     setup = setup_diagnostics(ds, cfg.diagnostics) if cfg.diagnose else None
@@ -425,7 +429,7 @@ def alternative_rows(tag: str, ds: Dataset, gt: Trajectory) -> list[Row]:
 
     rows: list[Row] = []
     for name, over in ALTERNATIVES:
-        r = timed_run(ds, gt, config_from_dict(over, "bench_speed"))
+        r = timed_run(ds, gt, config_from_dict({**over, "vio": {"enabled": False}}, "bench_speed"))
         rows.append({"name": f"speed {tag} [{name}] mono VO throughput",
                      "value": r.n_frames / r.cpu_s, "unit": "frames/s",
                      "note": f"1 run; Sim3 ATE {r.ate_refined_pct:.3f} % refined, "
