@@ -30,7 +30,7 @@ from typing import Any
 import bench
 from bench.headlines import HEADLINES
 
-QUICK_MODULES = ("bench_diagnostics", "bench_diag_truth", "bench_speed")
+QUICK_MODULES = ("bench_diagnostics", "bench_diag_truth")  # under 5 minutes; bench_speed alone takes 6
 
 
 def _modules(only: list[str] | None) -> list[str]:
