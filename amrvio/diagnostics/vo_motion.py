@@ -112,8 +112,7 @@ def _points(T_pred: F64, points_world: F64, camera: CameraModel, v: F64,
     if X.shape[0] < MIN_POINTS or not (np.all(np.isfinite(v)) and np.all(np.isfinite(w))):
         return None
     uv = camera.project(X)
-    inside = np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= 0) & (uv[:, 0] <= camera.width - 1) & (
-        uv[:, 1] >= 0) & (uv[:, 1] <= camera.height - 1)
+    inside = camera.in_image(uv, border_px=0.5)  # pixel centres 0 .. W-1 (NaN: outside)
     if int(inside.sum()) < MIN_POINTS:
         return None
     return CameraMotion(v, X[inside, 2], uv[inside], w)

@@ -378,7 +378,7 @@ class VioStage:
         T_cam_body = self.setup.T_body_cam.inverse().matrix()
         p_body = np.einsum("nij,j->ni", T_vo_cam, T_cam_body[:, 3])[:, :3]  # body origin, VO units
         vo = float(np.sum(np.linalg.norm(np.diff(p_body, axis=0), axis=1)))
-        metres = sum(wheel.distance_m(int(a), int(b)) for a, b in zip(stamps[:-1], stamps[1:], strict=True))
+        metres = wheel.distance_m(int(stamps[0]), int(stamps[-1]))  # the integral is additive
         # the lever arm makes the body path differ from the camera's only while turning
         scale = metres / vo if vo > 0 and metres > 0.2 else float("nan")
         return scale, res
