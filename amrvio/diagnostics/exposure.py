@@ -154,10 +154,9 @@ def fit_exposure_frames(
     # the curvature needs the patch's border ring, whose own weight is zero: only the inner
     # (2r-1)^2 samples enter the fit
     xr, bad0 = prev.patch_grid(q0.astype(np.intp), r, 2 * r + 1)
-    w = _curvature_weights(xr, r, cfg.curvature_dn)
     n = 2 * r + 1
-    inner = (np.arange(1, n - 1)[:, None] * n + np.arange(1, n - 1)[None, :]).ravel()
-    x, w, bad0 = xr[:, inner], w[:, inner], bad0[:, inner]
+    x, w = _inner_and_weights(xr.reshape(-1, n, n), cfg.curvature_dn)
+    bad0 = bad0.reshape(-1, n, n)[:, 1:-1, 1:-1].reshape(len(q0), -1)
     # ``cur`` at the sub-pixel positions: every sample of a patch has the same fraction, so the
     # patch is one bilinear blend of a (2r)^2 grid of integer box means; a sample is masked when
     # any of its four neighbours' boxes clips
@@ -244,17 +243,17 @@ def fit_exposure_on_correspondences(
     )
 
 
-def _curvature_weights(x: F64, radius: int, scale_dn: float) -> NDArray[np.float64]:
-    # Sub-pixel resampling error ~ (d^2 / 2) * Laplacian: trust flat samples, drop patch borders.
-    n = 2 * radius + 1
-    p = x.reshape(-1, n, n).astype(np.float64)
-    lap = np.zeros_like(p)
-    lap[:, 1:-1, 1:-1] = (
-        p[:, 2:, 1:-1] + p[:, :-2, 1:-1] + p[:, 1:-1, 2:] + p[:, 1:-1, :-2] - 4.0 * p[:, 1:-1, 1:-1]
-    )
-    w = 1.0 / (1.0 + (lap / scale_dn) ** 2)
-    w[:, 0, :] = w[:, -1, :] = w[:, :, 0] = w[:, :, -1] = 0.0
-    return w.reshape(x.shape)
+def _inner_and_weights(p: F64, scale_dn: float) -> tuple[F64, F64]:
+    """The inner samples (N, (n-2)^2) of (N, n, n) patches and their weights
+    ``1 / (1 + (Laplacian / scale_dn)^2)``: sub-pixel resampling error grows as (d^2 / 2) times
+    the Laplacian, so flat samples are trusted; the border ring only feeds the Laplacian."""
+    c = p[:, 1:-1, 1:-1]
+    lap = p[:, 2:, 1:-1] + p[:, :-2, 1:-1] + p[:, 1:-1, 2:] + p[:, 1:-1, :-2] - 4.0 * c
+    lap *= 1.0 / scale_dn
+    lap *= lap
+    lap += 1.0
+    n = len(p)
+    return c.reshape(n, -1), np.reciprocal(lap).reshape(n, -1)
 
 
 def fit_exposure_same_pixel(

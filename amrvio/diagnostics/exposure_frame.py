@@ -62,14 +62,13 @@ class ExposureFrame:
         i01, i10, i11 = i00 + k, i00 + k * row, i00 + k * row + k
         f = self.integral.reshape(-1)
         # int32 integrals: every partial difference is a sum over part of the image (no overflow)
-        sums = f.take(i11) - f.take(i01) - f.take(i10) + f.take(i00)
-        mean = np.asarray(sums, np.float64) * (1.0 / (k * k))
-        outside = np.repeat(~inside[:, None], i00.shape[1], axis=1)
+        t = f.take(np.stack((i11, i01, i10, i00)))
+        mean = np.asarray(t[0] - t[1] - t[2] + t[3], np.float64) * (1.0 / (k * k))
+        outside = np.broadcast_to(~inside[:, None], i00.shape)
         if self.clip_integral is None:  # nothing clips in this frame
             return mean, outside
-        c = self.clip_integral.reshape(-1)
-        clipped = (c.take(i11) - c.take(i01) - c.take(i10) + c.take(i00)) > 0
-        return mean, clipped | outside
+        c = self.clip_integral.reshape(-1).take(np.stack((i11, i01, i10, i00)))
+        return mean, (c[0] - c[1] - c[2] + c[3] > 0) | outside
 
     @property
     def bad(self) -> NDArray[np.bool_]:
