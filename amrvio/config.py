@@ -98,6 +98,7 @@ HELP: dict[str, str] = {
     "diagnostics.tracking.lk.border_px": "tracks closer to the border are dropped (px)",
     "diagnostics.tracking.lk.epipolar": "epipolar outlier check; null: off",
     "diagnostics.tracking.lk.max_width_px": "wider images are tracked on a coarser pyramid level (px)",
+    "diagnostics.tracking.lk.reduce_by_area": "that level by 2x2 averaging (true) or Gaussian pyrDown",
     "diagnostics.tracking.lk.fb_pyr_levels": "pyramid levels of the backward check; null: as pyr_levels",
     "diagnostics.reference": "parallax reference frame",
     "diagnostics.reference.min_tracks": "tracks below which the reference is renewed",

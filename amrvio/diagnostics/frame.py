@@ -15,6 +15,7 @@ when the predicted smear (rotation from the gyro, plus translation when the call
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -64,7 +65,7 @@ from amrvio.diagnostics.tracks import (
     track_between,
     tracker_mask,
 )
-from amrvio.diagnostics.vo_motion import MotionHistory
+from amrvio.diagnostics.vo_motion import MotionHistory, motion_at_pose
 from amrvio.errors import ShapeError
 from amrvio.tracking.detect import detect_corners
 from amrvio.tracking.lk import LkTracker
@@ -211,17 +212,32 @@ class FrameDiagnostics:
                                             self.config.smear_bound_px, motion=motion)
         return pred, advice
 
-    def observe_pose(self, t_ns: int, T_cam_world: F64 | None, segment: int | None) -> None:
-        """The pose the VO tracked for the frame at ``t_ns`` (None: none) in map ``segment``."""
-        self._poses.observe(t_ns, T_cam_world, segment)
+    def observe_pose(self, t_ns: int, key: int | None, segment: int | None) -> None:
+        """The frame at ``t_ns`` was tracked in map ``segment`` (``key``: the caller's handle on
+        its pose, see :meth:`with_vo_motion`; None: it has no pose)."""
+        self._poses.observe(t_ns, key, segment)
 
-    def with_vo_motion(self, health: FrameHealth, points_world: F64) -> FrameHealth:
-        """``health`` with the smear's translational part, from the poses given to
-        :meth:`observe_pose` (up to this frame's) and the (N, 3) map points of the live tracks
-        (see :mod:`~amrvio.diagnostics.vo_motion`); unchanged without a camera or a motion."""
+    def with_vo_motion(self, health: FrameHealth, pose_of: Callable[[int], F64 | None],
+                       points_world: F64) -> FrameHealth:
+        """``health`` with the smear's translational part, from the frames given to
+        :meth:`observe_pose` (up to this frame's; ``pose_of(key)``: a frame's ``T_cam_world``
+        as the map now has it) and the (N, 3) map points of the live tracks (see
+        :mod:`~amrvio.diagnostics.vo_motion`); unchanged without a camera or a motion."""
         if self.camera is None:
             return health
-        motion = self._poses.camera_motion(health.t_ns, points_world, self.camera)
+        motion = self._poses.camera_motion(health.t_ns, pose_of, points_world, self.camera)
+        return health if motion is None else self.with_motion(health, motion)
+
+    def with_pose_motion(self, health: FrameHealth, T_cam_world: F64, v_cam: F64,
+                         points_world: F64) -> FrameHealth:
+        """``health`` with the smear's translational part from a camera at ``T_cam_world``
+        moving at ``v_cam`` (camera frame) among the (N, 3) ``points_world``, all in one
+        world's units (the VIO's prediction, in metres); unchanged without a camera or when too
+        few of the points are in view."""
+        if self.camera is None:
+            return health
+        motion = motion_at_pose(np.asarray(T_cam_world, dtype=np.float64), points_world,
+                                self.camera, np.asarray(v_cam, dtype=np.float64), None)
         return health if motion is None else self.with_motion(health, motion)
 
     def with_motion(self, health: FrameHealth, motion: CameraMotion) -> FrameHealth:

@@ -99,6 +99,17 @@ class TrajectoryComposer:
             T_cw = a.T_cam_ref @ sg.mapper.map.keyframes[a.keyframe].T_cam_world
         return sg.pose_in_world(T_cw) if sg is not None else se3_matrix_inverse(T_cw)
 
+    def pose_in_segment(self, index: int, segment: int | None, m: VoMap) -> F64 | None:
+        """4x4 ``T_cam_world`` of frame ``index`` in ``segment`` (whose map is ``m``) with the
+        keyframes as they are now; None for a frame of another segment, or whose pose is
+        neither relative to a keyframe nor absolute in the segment."""
+        a = self.anchors[index]
+        if segment is None or a.segment != segment:
+            return None
+        if a.kind is AnchorKind.KEYFRAME and a.keyframe is not None:
+            return a.T_cam_ref @ m.keyframes[a.keyframe].T_cam_world
+        return a.T_cam_ref if a.kind is AnchorKind.ABSOLUTE else None
+
     def _refine(self, m: VoMap, T_cw: F64, obs: Observations) -> F64:
         has = m.points_of(obs.ids)
         if int(has.sum()) < self.gates.min_points:

@@ -28,6 +28,7 @@ from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, Track
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
 from amrvio.pipeline.records import EstimatorReport, FrameRecord, PipelineOutput, PoseStatus
 from amrvio.pipeline.recovery import MapRecovery, implausible_jump, link_to_previous
+from amrvio.pipeline.smear_motion import ROUGH_POSES, with_translation
 from amrvio.pipeline.vio_stage import ImuSetup, SensorStages, VioStage, vio_input
 from amrvio.types.camera import CameraModel
 from amrvio.types.lie import Sim3, se3_matrix_inverse
@@ -142,14 +143,15 @@ class Pipeline:
 
     def _emit(self, index: int, t_ns: int, blur: BlurResult, health: FrameHealth | None,
               step: _Step, events: list[str], imu: ImuData | None) -> FrameRecord:
-        diag = self.sensors.diagnostics
-        if diag is not None:  # the smear's translational part, from the VO's motion
-            tracked = step.anchor.status is PoseStatus.TRACKED and self.tracker.mapped
-            diag.observe_pose(t_ns, step.T_cam_world if tracked else None, self._segment_id())
-            if health is not None and self.tracker.mapped and self.mapping.segments:
-                m, ids = self.mapping.current.mapper.map, self.tracker.tracks.ids
-                health = diag.with_vo_motion(health, m.xyz[ids[m.points_of(ids)]])
         self.composer.add(step.anchor)
+        diag, seg = self.sensors.diagnostics, self._segment_id()
+        if diag is not None and health is not None:  # the smear's translation (pipeline.smear_motion)
+            tracked = step.anchor.status is PoseStatus.TRACKED and self.tracker.mapped and \
+                step.tracking.outcome not in ROUGH_POSES
+            diag.observe_pose(t_ns, index if tracked else None, seg)
+            m = self.mapping.current.mapper.map if self.tracker.mapped and seg is not None else None
+            health = with_translation(diag, health, self.sensors.vio, t_ns, imu, m, self.tracker.tracks.ids,
+                                      lambda i: None if m is None else self.composer.pose_in_segment(i, seg, m))
         kf = (self._segment_id() or 0, step.keyframe.kf_id) if step.keyframe is not None else None
         t0 = time.perf_counter()
         vio = None if self.sensors.vio is None else self.sensors.vio.process(

@@ -47,6 +47,7 @@ from amrvio.estimator.vio_types import (
 )
 from amrvio.imu.propagation import ImuBias, InertialState
 from amrvio.imu.static_init import StaticInitConfig, StaticInitResult, static_init
+from amrvio.pipeline.imu_log import ImuLog
 from amrvio.pipeline.records import BodyTrajectory, PoseStatus
 from amrvio.pipeline.vio_report import ImuSetup, VioFrameInput, VioPhase, VioReport, VioStageConfig, vio_input
 from amrvio.types.lie import SE3, SO3, Sim3
@@ -88,43 +89,15 @@ class _StaticStart:
     result: StaticInitResult | None = None
 
 
-class _ImuLog:
-    """The recent IMU samples (``keep_s`` seconds), for the initialisations."""
-
-    def __init__(self, keep_s: float) -> None:
-        self.keep_ns = int(keep_s * 1e9)
-        self.t: list[I64] = []
-        self.g: list[F64] = []
-        self.a: list[F64] = []
-        self.last = -(2**62)
-        self.first = -1
-
-    def add(self, imu: ImuData) -> None:
-        new = np.asarray(imu.stamps_ns) > self.last
-        if not np.any(new):
-            return
-        self.t.append(np.asarray(imu.stamps_ns)[new])
-        self.g.append(np.asarray(imu.gyro_rad_s)[new])
-        self.a.append(np.asarray(imu.accel_m_s2)[new])
-        self.last = int(self.t[-1][-1])
-        if self.first < 0:
-            self.first = int(self.t[0][0])
-        while len(self.t) > 1 and int(self.t[1][0]) < self.last - self.keep_ns:
-            del self.t[0], self.g[0], self.a[0]
-
-    def span(self, t0: int, t1: int) -> ImuData:
-        if not self.t:
-            return ImuData(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
-        return ImuData(np.concatenate(self.t), np.vstack(self.g), np.vstack(self.a)).window(t0, t1)
-
-
 @dataclass
 class BodyTrack:
-    """Per frame index: the body pose ``T_world_body`` (4x4) the stage gives it, and frame times."""
+    """Per frame index: the body pose ``T_world_body`` (4x4) the stage gives it, and frame times;
+    whether the newest smoothed pose passed its consistency checks."""
 
     poses: dict[int, F64] = field(default_factory=dict)
     index_of: dict[int, int] = field(default_factory=dict)
     bridged: set[int] = field(default_factory=set)
+    consistent: bool = False  # the newest smoothed pose passed the consistency checks
 
     def set(self, index: int, t_ns: int, T_world_body: SE3, bridged: bool = False) -> None:
         self.index_of[t_ns] = index
@@ -156,7 +129,7 @@ class VioStage:
         self.backend = VioBackend(VioConfig(imu=setup.noise, imu_noise_scale=config.imu_noise_scale,
                                             window_keyframes=config.window_keyframes), K, setup.T_body_cam)
         self.mapping = mapping
-        self.imu = _ImuLog(config.max_init_window_s + 3.0)
+        self.imu = ImuLog(config.max_init_window_s + 3.0)
         self.vo_keyframes: list[tuple[int, int, int]] = []  # (t_ns, segment, kf id) of one segment
         self.start = _StaticStart()
         self.last_init: ViInitResult | None = None
@@ -194,11 +167,13 @@ class VioStage:
                 return VioReport(VioPhase.NO_IMU, est, last_init=self.last_init, init_kind=self.kind)
             # the solver failed: restart at the IMU prediction, with the landmarks it had
             events.append(f"vio_reinit:{est.status.value}")
+            self.track.consistent = False
             self.track.set(index, inp.t_ns, pred.T_world_body, bridged=True)
             self._reinit(pred, obs, imu, landmarks)
             return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
         self.track.set(index, inp.t_ns, est.state.T_world_body)
         self.track.update(self.backend.window())
+        self.track.consistent = res.checks is None or res.checks.ok
         if res.checks is not None and not res.checks.ok and self.cfg.reinit_on_check_failure:
             failed = [c.value for c in res.checks.failed]
             events.append(f"vio_reinit:{'+'.join(failed)}")
