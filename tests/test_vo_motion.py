@@ -68,15 +68,19 @@ def test_poses_are_read_when_asked_not_when_observed() -> None:
 
 
 def test_a_gap_or_a_new_segment_restarts_the_history() -> None:
+    """After a gap the history keeps only its last pose before it: the first frame after the
+    gap gets the velocity across the gap, the next ones the new velocity."""
     poses: dict[int, np.ndarray] = {}
-    h = _history(4, poses)
-    # nothing tracked for 6 frame intervals, then two frames moving at twice the velocity
+    h = _history(4, poses)  # frames 0..3 at V_WORLD
+    # nothing tracked for 6 frame intervals (the camera covers 0.7 s x V_WORLD meanwhile), then
+    # frames moving at twice the velocity
     for k in (10, 11):
         poses[k] = np.eye(4)
-        poses[k][:3, 3] = -(V_WORLD * 0.3 + 2.0 * V_WORLD * (k - 10) * 0.1)
+        poses[k][:3, 3] = -(V_WORLD * 0.3 + 0.7 * V_WORLD + 2.0 * V_WORLD * (k - 10) * 0.1)
         h.observe(k * DT_NS, k, segment=0)
-    m = h.camera_motion(11 * DT_NS, poses.get, _points(), CAM)
-    assert m is not None and m.velocity_cam_m_s == pytest.approx(2.0 * V_WORLD, abs=1e-9)
+        m = h.camera_motion(k * DT_NS, poses.get, _points(), CAM)
+        across, new = V_WORLD, 2.0 * V_WORLD
+        assert m is not None and m.velocity_cam_m_s == pytest.approx(across if k == 10 else new, abs=1e-9)
     # a frame of another map segment: no history to difference
     h.observe(12 * DT_NS, 12, segment=1)
     poses[12] = _T_cam_world(1.2)

@@ -6,8 +6,9 @@ live tracks: the last ``HISTORY`` tracked poses of the current map segment give 
 each interval at its mid-point, a least-squares line through them (constant acceleration) gives
 the velocity at the frame's mid-exposure, and the points give the depths. A frame that was not
 tracked (lost, blurred) takes the same line extrapolated to its time, up to ``MAX_AGE_FRAMES``
-frame intervals after the last pose; a pose after a longer gap starts the history again (a
-velocity across the gap would average what happened in it). Velocity and depths are both in map
+frame intervals after the last pose; a pose after a longer gap starts the history again from
+the last pose before it (the one velocity across the gap averages what happened in it, better
+than none while the new poses come). Velocity and depths are both in map
 units and the translational smear depends only on their ratio, so the monocular scale cancels:
 no metric scale is needed. The angular rate comes along for frames without gyro samples.
 
@@ -66,7 +67,10 @@ class MotionHistory:
         if key is not None and segment is not None:
             p = self._frames
             if len(p) >= 2 and (t_ns - p[-1][0]) > MAX_AGE_FRAMES * (p[-1][0] - p[-2][0]):
-                p.clear()  # after a gap: a velocity across it averages what happened meanwhile
+                # after a gap only its last pose before it stays: the one velocity across the
+                # gap averages what happened meanwhile, better than none until new ones come
+                while len(p) > 1:
+                    p.popleft()
             p.append((int(t_ns), int(key)))
 
     def camera_motion(self, t_ns: int, pose_of: Callable[[int], F64 | None], points_world: F64,
