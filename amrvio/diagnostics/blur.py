@@ -48,17 +48,17 @@ def var_laplacian(image: NDArray[np.generic], step: int = 1) -> float:
 
 def blur_score(image: NDArray[np.generic], var_lap: float | None = None) -> float:
     """Contrast-normalised focus measure of an (H, W) grey image:
-    ``Var(Delta I) / max(Var(I), 1)``, the Laplacian's variance on every second row and column
-    of the full-resolution Laplacian, the image's on all pixels (one pass, no strided copy).
-    Invariant to an affine brightness change (both variances scale by a^2).
+    ``Var(Delta I) / max(Var(I), 1)``, both on every second row and column (the Laplacian at full
+    resolution). Invariant to an affine brightness change (both variances scale by a^2).
     ``var_lap``: ``var_laplacian(image, step=2)`` when the caller has it already."""
     img = np.asarray(image)
     if var_lap is None:
         var_lap = var_laplacian(img, step=2)
-    if img.dtype == np.uint8 or img.dtype == np.float32:  # a fifth of np.var's time at 752x480
-        var = float(cv2.meanStdDev(np.ascontiguousarray(img))[1][0, 0]) ** 2
+    sub = img[::2, ::2]
+    if img.dtype == np.uint8:  # a fifth of np.var's time at 752x480
+        var = float(cv2.meanStdDev(np.ascontiguousarray(sub))[1][0, 0]) ** 2
     else:
-        var = float(np.var(img))
+        var = float(np.var(sub))
     return var_lap / max(var, 1.0)
 
 
