@@ -182,7 +182,7 @@ HELP: dict[str, str] = {
     "vio.reinit_on_check_failure": "re-initialise the smoother when a consistency check fails",
     "vio.max_init_scale_rel_std": "scale std / scale the dynamic initialisation must reach",
     "vio.max_init_gravity_std_deg": "gravity-direction std the dynamic initialisation must reach (deg)",
-    "vio.max_smear_px": "gyro-predicted smear (px) above which a frame is bridged by the IMU",
+    "vio.max_smear_px": "predicted smear (px, rotation + translation) above which the IMU bridges a frame",
     "vio.wheel_sigma_m_s": "std of the wheel-odometry body velocity (m/s; 0: wheels not used; --wheels: 0.05)",
     "recovery.link": "placing a new map by the 3-D points it shares with the previous one",
     "recovery.link.min_common": "shared points needed",

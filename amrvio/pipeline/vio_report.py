@@ -41,8 +41,9 @@ class VioStageConfig:
     of the wheel-odometry velocity (forward speed, and the zero sideways and vertical speed of a
     ground robot) when the recording has wheel odometry (0, the default: not used; a wheel file
     does not say the platform is a ground robot; ``amrvio run --wheels`` sets 0.05);
-    ``max_smear_px``: a frame whose gyro-predicted smear is larger is bridged by the IMU (its
-    tracks are not trusted), whatever the blur gate said."""
+    ``max_smear_px``: a frame whose predicted smear (the gyro's rotation plus the translation,
+    :mod:`amrvio.pipeline.smear_motion`) is larger is bridged by the IMU (its tracks are not
+    trusted), whatever the blur gate said."""
 
     enabled: bool = True
     imu_noise_scale: float = 1.0
