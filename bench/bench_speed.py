@@ -210,22 +210,34 @@ def stage_table(runs: list[RunFigures]) -> list[tuple[str, float]]:
     return out
 
 
-def measure(tag: str, ds: Dataset, gt: Trajectory, repeats: int, target_fps: float,
-            target_ate_pct: float | None) -> list[Row]:
-    runs = [timed_run(ds, gt) for _ in range(repeats)]
-    n = runs[0].n_frames
+def _speed_rows(runs: list[RunFigures], name: str, stage_prefix: str, target_fps: float,
+                note_tail: str = "") -> tuple[Row, list[Row]]:
+    """The throughput row ``name`` (median CPU time of ``runs``) and one row per stage."""
+    n, repeats = runs[0].n_frames, len(runs)
     cpu = statistics.median(r.cpu_s for r in runs)
     wall = statistics.median(r.wall_s for r in runs)
     fps = n / cpu
+    head: Row = {"name": name, "value": fps, "unit": "frames/s",
+                 "target": f">= {target_fps:g} frames/s on one core", "pass": fps >= target_fps,
+                 "note": f"{n} frames, median of {repeats}, CPU time (process); wall {n / wall:.1f} "
+                         f"frames/s (shared machine){note_tail}"}
+    stages: list[Row] = [
+        {"name": f"{stage_prefix} {stage}", "value": ms, "unit": "ms/frame",
+         "note": f"CPU, median of {repeats}; {100 * ms * n / 1e3 / cpu:.0f} % of the loop"}
+        for stage, ms in stage_table(runs)]
+    return head, stages
+
+
+def measure(tag: str, ds: Dataset, gt: Trajectory, repeats: int, target_fps: float,
+            target_ate_pct: float | None) -> list[Row]:
+    runs = [timed_run(ds, gt) for _ in range(repeats)]
     on = statistics.median(r.ate_online_pct for r in runs)
     ref = statistics.median(r.ate_refined_pct for r in runs)
     acc = f"Sim3 ATE {ref:.3f} % refined, {on:.3f} % online (causal)"
-    rows: list[Row] = [{
-        "name": f"speed {tag} mono VO throughput", "value": fps, "unit": "frames/s",
-        "target": f">= {target_fps:g} frames/s on one core", "pass": fps >= target_fps,
-        "note": f"{n} frames, median of {repeats}, CPU time (process); wall {n / wall:.1f} "
-                f"frames/s (shared machine); {acc}; "
-                f"{statistics.median(r.n_keyframes for r in runs):.0f} keyframes"}]
+    head, stages = _speed_rows(runs, f"speed {tag} mono VO throughput", f"speed {tag} stage",
+                               target_fps, f"; {acc}; {statistics.median(r.n_keyframes for r in runs):.0f} "
+                                           "keyframes")
+    rows: list[Row] = [head]
     if target_ate_pct is not None:
         rows.append({"name": f"speed {tag} Sim3 ATE / path (refined)", "value": ref, "unit": "%",
                      "target": f"<= {target_ate_pct:g} %", "pass": ref <= target_ate_pct,
@@ -235,11 +247,7 @@ def measure(tag: str, ds: Dataset, gt: Trajectory, repeats: int, target_fps: flo
                      "note": "same runs"})
     rows.append({"name": f"speed {tag} Sim3 ATE / path (online, causal)", "value": on,
                  "unit": "%", "note": "the pose each frame had when it was processed"})
-    for stage, ms in stage_table(runs):
-        rows.append({"name": f"speed {tag} stage {stage}", "value": ms, "unit": "ms/frame",
-                     "note": f"CPU, median of {repeats}; {100 * ms * n / 1e3 / cpu:.0f} % of "
-                             "the loop"})
-    return rows
+    return rows + stages
 
 
 def measure_vio(tag: str, ds: Dataset, repeats: int, target_fps: float, ate_max_m: float,
@@ -250,30 +258,20 @@ def measure_vio(tag: str, ds: Dataset, repeats: int, target_fps: float, ate_max_
         raise RuntimeError("the simulator wrote no ground truth")
     runs = [timed_run(ds, _sim_gt(ds), PipelineConfig(), gt_body=ds.groundtruth)
             for _ in range(repeats)]
-    n = runs[0].n_frames
-    cpu = statistics.median(r.cpu_s for r in runs)
-    wall = statistics.median(r.wall_s for r in runs)
-    fps = n / cpu
     ate = statistics.median(np.nan if r.body_ate_se3_m is None else r.body_ate_se3_m for r in runs)
     scale = statistics.median(np.nan if r.body_scale_error_pct is None else r.body_scale_error_pct
                               for r in runs)
-    rows: list[Row] = [
-        {"name": f"speed {tag} VIO throughput", "value": fps, "unit": "frames/s",
-         "target": f">= {target_fps:g} frames/s on one core", "pass": fps >= target_fps,
-         "note": f"{n} frames, median of {repeats}, CPU time (process); wall {n / wall:.1f} "
-                 f"frames/s (shared machine)"},
+    head, stages = _speed_rows(runs, f"speed {tag} VIO throughput", f"speed {tag} VIO stage", target_fps)
+    return [
+        head,
         {"name": f"speed {tag} VIO SE3 ATE (body)", "value": ate, "unit": "m",
          "target": f"<= {ate_max_m:g} m", "pass": bool(ate <= ate_max_m),
          "note": "same runs, the body poses of trajectory.tum"},
         {"name": f"speed {tag} VIO scale error", "value": scale, "unit": "%",
          "target": f"<= {scale_max_pct:g} %", "pass": bool(scale <= scale_max_pct),
          "note": "same runs, Sim3 scale of the body poses"},
+        *stages,
     ]
-    for stage, ms in stage_table(runs):
-        rows.append({"name": f"speed {tag} VIO stage {stage}", "value": ms, "unit": "ms/frame",
-                     "note": f"CPU, median of {repeats}; {100 * ms * n / 1e3 / cpu:.0f} % of "
-                             "the loop"})
-    return rows
 
 
 def sim_replay(out: Path, seconds: float, width: int = 752, height: int = 480) -> Path | None:

@@ -50,9 +50,7 @@ def vio_camera_motion(stage: VioStage, t_ns: int, imu: ImuData | None) -> tuple[
     prediction is the one the stage starts from for the same frame (propagation is idempotent)."""
     if not stage.running or not stage.track.consistent:
         return None
-    if imu is not None:
-        stage.imu.add(imu)
-    span = stage.imu.span(t_ns - 200_000_000, t_ns + 50_000_000) if imu is None else imu
+    span = stage.frame_imu(t_ns, imu)
     if len(span) == 0:
         return None
     est = stage.backend.propagate(t_ns, span)

@@ -141,14 +141,20 @@ class VioStage:
     def running(self) -> bool:
         return self.backend.initialised
 
+    def frame_imu(self, t_ns: int, imu: ImuData | None) -> ImuData:
+        """The IMU samples for the frame at ``t_ns``: ``imu``, the frame's own (added to the
+        log), or without them the log's samples around the frame."""
+        if imu is None:
+            return self.imu.span(t_ns - 200_000_000, t_ns + 50_000_000)
+        self.imu.add(imu)
+        return imu
+
     def process(self, index: int, inp: VioFrameInput, events: list[str]) -> VioReport:
         """The frame's report; its body pose goes into :attr:`track`; events are appended."""
-        if inp.imu is not None:
-            self.imu.add(inp.imu)
+        imu = self.frame_imu(inp.t_ns, inp.imu)
         obs = VisualObservations(inp.ids, inp.uv) if inp.usable else VisualObservations.empty()
         if not self.running:
             return self._before(index, inp, obs, events)
-        imu = self.imu.span(inp.t_ns - 200_000_000, inp.t_ns + 50_000_000) if inp.imu is None else inp.imu
         if not inp.usable or len(obs) < self.cfg.min_tracks or inp.smear_px > self.cfg.max_smear_px:
             est = self.backend.propagate(inp.t_ns, imu, bridged=True)
             if not est.ok or est.state is None:
