@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from amrvio.diagnostics.exposure_frame import ExposureFrame, clip_levels, integral_frame
+from amrvio.diagnostics.exposure_frame import ExposureFrame, clip_levels, integral_frame, patch_samples
 from amrvio.diagnostics.tracks import (
     TrackFrame,
     TrackingConfig,
@@ -150,29 +150,12 @@ def fit_exposure_frames(
         raise ShapeError(f"point arrays must both be (N,2), got {p0.shape}, {p1.shape}")
     q0 = np.round(p0)
     q1 = p1 + (q0 - p0)
-    r = max(cfg.patch_radius, 1)
-    # the curvature needs the patch's border ring, whose own weight is zero: only the inner
-    # (2r-1)^2 samples enter the fit
-    xr, bad0 = prev.patch_grid(q0.astype(np.intp), r, 2 * r + 1)
-    n = 2 * r + 1
-    x, w = _inner_and_weights(xr.reshape(-1, n, n), cfg.curvature_dn)
-    bad0 = bad0.reshape(-1, n, n)[:, 1:-1, 1:-1].reshape(len(q0), -1)
-    # ``cur`` at the sub-pixel positions: every sample of a patch has the same fraction, so the
-    # patch is one bilinear blend of a (2r)^2 grid of integer box means; a sample is masked when
-    # any of its four neighbours' boxes clips
     base = np.floor(q1)
-    f = (q1 - base)[:, None, None, :]
-    g, gbad = cur.patch_grid(base.astype(np.intp), r - 1, 2 * r)
-    m = 2 * r
-    g, gbad = g.reshape(-1, m, m), gbad.reshape(-1, m, m)
-    fx, fy = f[..., 0], f[..., 1]
-    y = ((1 - fy) * ((1 - fx) * g[:, :-1, :-1] + fx * g[:, :-1, 1:])
-         + fy * ((1 - fx) * g[:, 1:, :-1] + fx * g[:, 1:, 1:])).reshape(len(q1), -1)
-    bad1 = (gbad[:, :-1, :-1] | gbad[:, :-1, 1:] | gbad[:, 1:, :-1] | gbad[:, 1:, 1:]).reshape(
-        len(q1), -1)
+    smp = patch_samples(prev, cur, q0.astype(np.intp), base.astype(np.intp), q1 - base,
+                        cfg.patch_radius, cfg.curvature_dn)
     linear = prev.linear and cur.linear
     gcfg = _gain_config(cfg, linear, prev.clip_levels)
-    fit = fit_gain_offset(x, y, mask=~(bad0 | bad1), weights=w, config=gcfg)
+    fit = fit_gain_offset(smp.x, smp.y, mask=smp.usable, weights=smp.weight, config=gcfg)
     return _result(fit, cfg, "klt", int(p0.shape[0]))
 
 
@@ -241,19 +224,6 @@ def fit_exposure_on_correspondences(
         pts_cur,
         cfg,
     )
-
-
-def _inner_and_weights(p: F64, scale_dn: float) -> tuple[F64, F64]:
-    """The inner samples (N, (n-2)^2) of (N, n, n) patches and their weights
-    ``1 / (1 + (Laplacian / scale_dn)^2)``: sub-pixel resampling error grows as (d^2 / 2) times
-    the Laplacian, so flat samples are trusted; the border ring only feeds the Laplacian."""
-    c = p[:, 1:-1, 1:-1]
-    lap = p[:, 2:, 1:-1] + p[:, :-2, 1:-1] + p[:, 1:-1, 2:] + p[:, 1:-1, :-2] - 4.0 * c
-    lap *= 1.0 / scale_dn
-    lap *= lap
-    lap += 1.0
-    n = len(p)
-    return c.reshape(n, -1), np.reciprocal(lap).reshape(n, -1)
 
 
 def fit_exposure_same_pixel(

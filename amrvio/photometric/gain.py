@@ -33,6 +33,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from amrvio.errors import ShapeError
@@ -72,80 +73,212 @@ class GainFitConfig:
     group_k: float = 2.0
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class _Samples:
-    """The kept samples and their moments' integrands as the rows of one (6, n) matrix
-    ``[1, x, y, xx, yy, xy]``, so that all weighted moments are one matrix-vector product."""
-
-    x: F64
-    y: F64
-    m: F64
-
-    @staticmethod
-    def of(x: F64, y: F64) -> _Samples:
-        m = np.empty((6, x.size))
-        m[0] = 1.0
-        m[1], m[2] = x, y
-        np.multiply(x, x, out=m[3])
-        np.multiply(y, y, out=m[4])
-        np.multiply(x, y, out=m[5])
-        return _Samples(x, y, m)
+_STATUS = (AffineStatus.OK, AffineStatus.TOO_FEW_SAMPLES, AffineStatus.NO_CONTRAST,
+           AffineStatus.UNCORRELATED)  # the kernel's status codes
 
 
-def _median(v: F64) -> float:
-    """The upper median (one partition; np.median's NaN checks and averaging cost more here)."""
-    k = v.size // 2
-    return float(np.partition(v, k)[k])
+@njit(cache=True, nogil=True)
+def _select(v: F64, k: int) -> float:
+    """The ``k``-th smallest entry of ``v``, which is reordered in place (Hoare's quickselect,
+    median-of-three pivots)."""
+    lo, hi = 0, v.size - 1
+    while hi > lo:
+        p0, p1, p2 = v[lo], v[(lo + hi) // 2], v[hi]
+        pivot = max(min(p0, p1), min(max(p0, p1), p2))
+        i, j = lo, hi
+        while i <= j:
+            while v[i] < pivot:
+                i += 1
+            while v[j] > pivot:
+                j -= 1
+            if i <= j:
+                v[i], v[j] = v[j], v[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return float(v[k])
 
 
-def _line(smp: _Samples, w: F64, fit_offset: bool) -> tuple[float, float, float] | None:
-    """Reduced-major-axis line (a, b) of weighted samples and their weighted correlation."""
-    s, sx, sy, sxx, syy, sxy = (smp.m @ w).tolist()
+@njit(cache=True, nogil=True)
+def _upper_median(v: F64) -> float:
+    """The upper median of a non-empty vector (left as it is)."""
+    return _select(v.copy(), v.size // 2)
+
+
+@njit(cache=True, nogil=True)
+def _insertion_sort(v: F64, n: int) -> None:
+    """Sort ``v[:n]`` in place (the few samples of one patch)."""
+    for i in range(1, n):
+        t, j = v[i], i - 1
+        while j >= 0 and v[j] > t:
+            v[j + 1] = v[j]
+            j -= 1
+        v[j + 1] = t
+
+
+@njit(cache=True, nogil=True)
+def _rma(s: float, sx: float, sy: float, sxx: float, syy: float, sxy: float, fit_offset: bool
+         ) -> tuple[bool, float, float, float]:
+    """Reduced-major-axis line (ok, a, b, weighted correlation) from the weighted sums of
+    ``1, x, y, xx, yy, xy``."""
     if not fit_offset:  # through the origin: a = sqrt(Syy / Sxx) about 0
         if not (sxx > 0 and syy > 0 and sxy > 0):
-            return None
-        return math.sqrt(syy / sxx), 0.0, sxy / math.sqrt(sxx * syy)
+            return False, 1.0, 0.0, 0.0
+        return True, math.sqrt(syy / sxx), 0.0, sxy / math.sqrt(sxx * syy)
     if not s > 0:
-        return None
+        return False, 1.0, 0.0, 0.0
     mx, my = sx / s, sy / s
     vxx, vyy, vxy = sxx / s - mx * mx, syy / s - my * my, sxy / s - mx * my
     if not (vxx > 1e-9 and vyy > 1e-9) or vxy <= 0:
-        return None
+        return False, 1.0, 0.0, 0.0
     a = math.sqrt(vyy / vxx)
-    return a, my - a * mx, vxy / math.sqrt(vxx * vyy)
+    return True, a, my - a * mx, vxy / math.sqrt(vxx * vyy)
 
 
-def _group_inliers(r: F64, index: NDArray[np.intp], used: NDArray[np.bool_],
-                   shape: tuple[int, int], cfg: GainFitConfig) -> F64:
-    """1.0 for the samples (flat ``index`` into ``shape``) of rows whose median residual is not
-    an outlier among the rows' medians, else 0.0 (rows without used samples carry no weight)."""
-    n_rows, n_cols = shape
-    full = np.full(n_rows * n_cols, np.inf)
-    at = index[used]
-    full[at] = r[used]
-    srt = np.sort(full.reshape(shape), axis=1).ravel()  # unused (inf) last
-    cnt = np.bincount(at // n_cols, minlength=n_rows)
-    rows = np.flatnonzero(cnt)
-    if rows.size < 3:
-        return np.ones(r.size)
-    c, base = cnt[rows], rows * n_cols
-    med = 0.5 * (srt[base + (c - 1) // 2] + srt[base + c // 2])
-    centre = _median(med)
-    dev = np.abs(med - centre)
-    spread = max(1.4826 * _median(dev), cfg.min_sigma)
-    bad_rows = np.zeros(n_rows, dtype=bool)
-    bad_rows[rows] = dev > cfg.group_k * spread
-    return np.where(bad_rows[index // n_cols], 0.0, 1.0)
+@njit(cache=True, nogil=True)
+def _group_inliers(r: F64, row: NDArray[np.intp], used: NDArray[np.bool_], group_k: float,
+                   min_sigma: float) -> F64:
+    """1.0 for the samples of rows (``row``: each sample's row, non-decreasing) whose median
+    residual over their used samples is not an outlier among the rows' medians, else 0.0 (rows
+    without used samples carry no weight in that judgement)."""
+    n = r.size
+    out = np.ones(n)
+    starts = np.empty(n + 1, np.intp)  # runs of one row
+    n_runs = 0
+    for i in range(n):
+        if i == 0 or row[i] != row[i - 1]:
+            starts[n_runs] = i
+            n_runs += 1
+    starts[n_runs] = n
+    med = np.empty(n_runs)
+    has = np.zeros(n_runs, np.bool_)
+    buf = np.empty(n)
+    n_rows = 0
+    for j in range(n_runs):
+        c = 0
+        for i in range(starts[j], starts[j + 1]):
+            if used[i]:
+                buf[c] = r[i]
+                c += 1
+        if c > 0:
+            _insertion_sort(buf, c)
+            med[j] = 0.5 * (buf[(c - 1) // 2] + buf[c // 2])
+            has[j] = True
+            n_rows += 1
+    if n_rows < 3:
+        return out
+    meds = med[has]
+    centre = _upper_median(meds)
+    spread = max(1.4826 * _upper_median(np.abs(meds - centre)), min_sigma)
+    for j in range(n_runs):
+        if has[j] and abs(med[j] - centre) > group_k * spread:
+            out[starts[j]:starts[j + 1]] = 0.0
+    return out
 
 
-def _window(a: float, b: float, margin_dn: float, cfg: GainFitConfig) -> tuple[float, float]:
+@njit(cache=True, nogil=True)
+def _sums(xs: F64, ys: F64, w: F64) -> tuple[int, float, float, float, float, float, float]:
+    """The count of non-zero weights and the weighted sums of ``1, x, y, xx, yy, xy``."""
+    n = 0
+    s = sx = sy = sxx = syy = sxy = 0.0
+    for i in range(xs.size):
+        wi, xi, yi = w[i], xs[i], ys[i]
+        if wi != 0.0:
+            n += 1
+            s += wi
+            sx += wi * xi
+            sy += wi * yi
+            sxx += wi * xi * xi
+            syy += wi * yi * yi
+            sxy += wi * xi * yi
+    return n, s, sx, sy, sxx, syy, sxy
+
+
+@njit(cache=True, nogil=True)
+def _window(a: float, b: float, margin_dn: float, low: float, high: float) -> tuple[float, float]:
     """The x range whose model values stay ``margin`` clear of the clip levels in both frames."""
     sa = math.sqrt(a)
     mx, my = margin_dn / sa, margin_dn * sa
-    low, high = cfg.clip_levels
-    lo = max(low + mx, (low + my - b) / a)
-    hi = min(high - mx, (high - my - b) / a)
-    return lo, hi
+    return max(low + mx, (low + my - b) / a), min(high - mx, (high - my - b) / a)
+
+
+@njit(cache=True, nogil=True)
+def _fit(xf: F64, yf: F64, keep_in: NDArray[np.bool_], prior: F64, n_cols: int, low: float,
+         high: float, margin: float, huber_k: float, tukey_k: float, huber_iterations: int,
+         max_iterations: int, min_sigma: float, min_samples: int, min_correlation: float,
+         fit_offset: bool, tol: float, group_k: float
+         ) -> tuple[int, float, float, int, float, int, float]:
+    """The iteratively reweighted fit of :func:`fit_gain_offset` on flat samples (``n_cols`` > 0:
+    rows of that many samples). Returns (status code of ``_STATUS``, a, b, n_used, rms residual,
+    iterations, median x of the used samples)."""
+    n = xf.size
+    keep = np.empty(n, np.bool_)
+    for i in range(n):
+        xi, yi, pi = xf[i], yf[i], prior[i]
+        keep[i] = (keep_in[i] and np.isfinite(xi) and np.isfinite(yi) and np.isfinite(pi)
+                   and pi > 0 and low < xi < high and low < yi < high)  # clipped in either
+    index = np.flatnonzero(keep)
+    m = index.size
+    xs, ys, ps = xf[index], yf[index], prior[index].copy()
+    n_min = max(min_samples, 3)
+    nan = np.nan
+    if m < n_min:
+        return 1, 1.0, 0.0, m, nan, 0, nan
+    _, s0, sx, sy, sxx, syy, sxy = _sums(xs, ys, ps)
+    ok, a, b, rho = _rma(s0, sx, sy, sxx, syy, sxy, fit_offset)
+    if not ok:
+        return 2, 1.0, 0.0, m, nan, 0, nan
+    w = ps.copy()
+    inside = np.ones(m, np.bool_)
+    r, absr, buf = np.empty(m), np.empty(m), np.empty(m)
+    it = 0
+    for it in range(1, max_iterations + 1):
+        inv_sa = 1.0 / math.sqrt(a)
+        n_in = 0
+        for i in range(m):
+            r[i] = (a * xs[i] - ys[i] + b) * inv_sa  # the symmetric residual
+            absr[i] = abs(r[i])
+            if inside[i]:
+                buf[n_in] = absr[i]
+                n_in += 1
+        sigma = max(1.4826 * _select(buf[:n_in], n_in // 2), min_sigma)
+        huber = it <= huber_iterations
+        if not huber and n_cols > 0 and it == huber_iterations + 1:
+            ps *= _group_inliers(r, index // n_cols, inside & (w > 0), group_k, min_sigma)
+        c, s_tukey = huber_k * sigma, 1.0 / (tukey_k * sigma)
+        lo, hi = _window(a, b, margin * sigma, low, high)
+        mid, half = a * (lo + hi) + b, a * (hi - lo)
+        for i in range(m):
+            # 2 a t_hat + b, t_hat the position along the line in units of x
+            inside[i] = abs(a * xs[i] + ys[i] - mid) <= half
+            w[i] = 0.0
+            if inside[i]:
+                if huber:
+                    w[i] = c / max(absr[i], c) * ps[i]  # Huber: 1 inside c, c / |r| beyond
+                else:
+                    u = min(absr[i] * s_tukey, 1.0)
+                    w[i] = (1.0 - u * u) ** 2 * ps[i]  # Tukey's biweight
+        n_w, s0, sx, sy, sxx, syy, sxy = _sums(xs, ys, w)
+        if n_w < n_min:  # an empty window: the spread swamps the range
+            return (3 if rho < min_correlation else 1), 1.0, 0.0, n_w, nan, it, nan
+        ok, a_new, b_new, rho = _rma(s0, sx, sy, sxx, syy, sxy, fit_offset)
+        if not ok:
+            return 2, 1.0, 0.0, n_w, nan, it, nan
+        da, db = a_new - a, b_new - b
+        a, b = a_new, b_new
+        if it > huber_iterations and abs(da) < tol * a and abs(db) < tol * 255.0:
+            break
+    used = w > 0
+    n_used = int(used.sum())
+    if rho < min_correlation:
+        return 3, 1.0, 0.0, n_used, nan, it, nan
+    res = (a * xs + b - ys)[used]
+    return 0, a, b, n_used, math.sqrt(np.mean(res * res)), it, _upper_median(xs[used])
 
 
 def fit_gain_offset(
@@ -167,87 +300,24 @@ def fit_gain_offset(
     weight; ``rms_residual``: of those, in DN of ``y``; ``x_median``: their median ``x``).
     """
     cfg = config or GainFitConfig()
-    xf = np.asarray(x, dtype=np.float64).ravel()
-    yf = np.asarray(y, dtype=np.float64).ravel()
     if np.shape(x) != np.shape(y):
         raise ShapeError(f"x and y must have the same shape, got {np.shape(x)} and {np.shape(y)}")
-    keep = np.isfinite(xf) & np.isfinite(yf)
+    for name, extra in (("mask", mask), ("weights", weights)):
+        if extra is not None and np.shape(extra) != np.shape(x):
+            raise ShapeError(f"{name} shape {np.shape(extra)} differs from x shape {np.shape(x)}")
+    xf = np.ascontiguousarray(x, dtype=np.float64).ravel()
+    yf = np.ascontiguousarray(y, dtype=np.float64).ravel()
+    keep = (np.ones(xf.size, dtype=bool) if mask is None
+            else np.ascontiguousarray(mask, dtype=bool).ravel())
+    prior = (np.ones(xf.size) if weights is None
+             else np.ascontiguousarray(weights, dtype=np.float64).ravel())
+    n_cols = int(np.shape(x)[1]) if np.ndim(x) == 2 else 0
     low, high = cfg.clip_levels
-    keep &= (xf > low) & (xf < high) & (yf > low) & (yf < high)  # clipped in either
-    if mask is not None:
-        if np.shape(mask) != np.shape(x):
-            raise ShapeError(f"mask shape {np.shape(mask)} differs from x shape {np.shape(x)}")
-        keep &= np.asarray(mask, dtype=bool).ravel()
-    prior = np.ones_like(xf)
-    if weights is not None:
-        if np.shape(weights) != np.shape(x):
-            raise ShapeError(f"weights shape {np.shape(weights)} differs from x shape {np.shape(x)}")
-        prior = np.asarray(weights, dtype=np.float64).ravel()
-        keep &= np.isfinite(prior) & (prior > 0)
-    n_total = int(xf.size)
-    shape2d = (int(np.shape(x)[0]), int(np.shape(x)[1])) if np.ndim(x) == 2 else None
-    index = np.flatnonzero(keep)
-    xs, ys, ps = xf[keep], yf[keep], prior[keep]
-    n_min = max(cfg.min_samples, 3)
-
-    def failed(status: AffineStatus, n: int, it: int = 0) -> AffineFit:
-        return AffineFit(1.0, 0.0, status, n, n_total, float("nan"), it)
-
-    if xs.size < n_min:
-        return failed(AffineStatus.TOO_FEW_SAMPLES, int(xs.size))
-    smp = _Samples.of(xs, ys)
-    start = _line(smp, ps, cfg.fit_offset)
-    if start is None:
-        return failed(AffineStatus.NO_CONTRAST, int(xs.size))
-    a, b, rho = start
-    w = ps
-    inside = np.ones(xs.size, dtype=bool)
-    r, absr, rw, z = (np.empty(xs.size) for _ in range(4))
-    it = 0
-    for it in range(1, cfg.max_iterations + 1):
-        np.multiply(xs, a, out=z)  # a x
-        np.subtract(z, ys, out=r)
-        r += b
-        r *= 1.0 / math.sqrt(a)  # the symmetric residual
-        np.abs(r, out=absr)
-        sigma = max(1.4826 * _median(absr[inside]), cfg.min_sigma)
-        if it <= cfg.huber_iterations:
-            c = cfg.huber_k * sigma
-            np.maximum(absr, c, out=rw)
-            np.divide(c, rw, out=rw)  # Huber: 1 inside c, c / |r| beyond
-        else:
-            if shape2d is not None and it == cfg.huber_iterations + 1:
-                ps = ps * _group_inliers(r, index, inside & (w > 0), shape2d, cfg)
-            np.multiply(absr, 1.0 / (cfg.tukey_k * sigma), out=rw)
-            np.minimum(rw, 1.0, out=rw)
-            np.multiply(rw, rw, out=rw)
-            np.subtract(1.0, rw, out=rw)
-            np.multiply(rw, rw, out=rw)  # Tukey's biweight
-        lo, hi = _window(a, b, cfg.margin * sigma, cfg)
-        z += ys  # = 2 a t_hat + b, t_hat the position along the line in units of x
-        z -= a * (lo + hi) + b
-        np.abs(z, out=z)
-        inside = z <= a * (hi - lo)
-        w = rw * ps
-        w *= inside
-        n_w = int(np.count_nonzero(w))
-        if n_w < n_min:  # an empty window: the spread swamps the range
-            status = AffineStatus.UNCORRELATED if rho < cfg.min_correlation else (
-                AffineStatus.TOO_FEW_SAMPLES)
-            return failed(status, n_w, it)
-        new = _line(smp, w, cfg.fit_offset)
-        if new is None:
-            return failed(AffineStatus.NO_CONTRAST, n_w, it)
-        da, db = new[0] - a, new[1] - b
-        a, b, rho = new
-        if it > cfg.huber_iterations and abs(da) < cfg.tol * a and abs(db) < cfg.tol * 255.0:
-            break
-    used = w > 0
-    if rho < cfg.min_correlation:
-        return failed(AffineStatus.UNCORRELATED, int(used.sum()), it)
-    res = (a * xs + b - ys)[used]
-    return AffineFit(a, b, AffineStatus.OK, int(used.sum()), n_total,
-                     float(np.sqrt(np.mean(res * res))), it, _median(xs[used]))
+    code, a, b, n_used, rms, it, x_med = _fit(
+        xf, yf, keep, prior, n_cols, float(low), float(high), cfg.margin, cfg.huber_k,
+        cfg.tukey_k, cfg.huber_iterations, cfg.max_iterations, cfg.min_sigma, cfg.min_samples,
+        cfg.min_correlation, cfg.fit_offset, cfg.tol, cfg.group_k)
+    return AffineFit(a, b, _STATUS[code], n_used, int(xf.size), rms, it, x_med)
 
 
 __all__ = ["GainFitConfig", "fit_gain_offset"]
