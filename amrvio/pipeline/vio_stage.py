@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.diagnostics.frame import FrameDiagnostics
+from amrvio.diagnostics.health import FrameHealth
 from amrvio.estimator.local_mapping import LocalMapping, Segment
 from amrvio.estimator.vi_init import (
     ViBiasPrior,
@@ -148,6 +149,18 @@ class VioStage:
             return self.imu.span(t_ns - 200_000_000, t_ns + 50_000_000)
         self.imu.add(imu)
         return imu
+
+    def smeared(self, health: FrameHealth | None, events: list[str]) -> bool:
+        """Whether the gyro-predicted smear of a frame, known before tracking, is above
+        ``max_smear_px`` (logged as ``smear_gated``): the stage bridges such a frame, and the
+        tracker must not move its tracks through it either. KLT in a smear loses most tracks and
+        starts new ones on smeared corners; the smoother would come back from the burst seeing
+        none of its landmarks, its scale held only by the IMU over a few frames."""
+        smear = None if health is None else health.blur.smear_px_pred
+        if smear is None or not smear > self.cfg.max_smear_px:
+            return False
+        events.append("smear_gated")
+        return True
 
     def process(self, index: int, inp: VioFrameInput, events: list[str]) -> VioReport:
         """The frame's report; its body pose goes into :attr:`track`; events are appended."""
