@@ -14,6 +14,7 @@ import pytest
 
 from amrvio.app.run import RunResult, run
 from amrvio.config import PipelineConfig
+from amrvio.estimator.vio_types import EstimateKind
 from amrvio.io.dataset import open_dataset
 from amrvio.io.trajectory import read_trajectory
 from amrvio.pipeline.records import PoseStatus
@@ -142,3 +143,21 @@ def test_frames_the_vio_bridges_for_smear_keep_the_tracks_through_a_blur_burst(
     t_s = np.array([r.t_ns for r in res.records]) * 1e-9
     al = yaw_alignment(res.output.body.T_world_body[:, :3, 3], gt.interpolated_at(t_s).positions_m)
     assert al["ate_m"] < 0.05, al
+
+
+def test_a_rejected_update_gives_its_frame_the_state_the_smoother_restarts_from(
+        burst_run: tuple[RunResult, Path]) -> None:
+    res, _ = burst_run
+    body = res.output.body
+    assert body is not None
+    for r in res.records:
+        vio = r.estimator.vio
+        if vio is None or vio.checks is None or vio.checks.ok:
+            continue
+        # the failed checks re-initialise at the IMU prediction; the optimised state they rejected
+        # (and the window it moved) must not become the frame's pose: the restart's state does,
+        # refined by the restarted smoother within its prior (2 cm)
+        assert any(e.startswith("vio_reinit:") for e in r.events)
+        assert vio.estimate is not None and vio.estimate.kind is EstimateKind.INITIAL
+        assert vio.estimate.state is not None
+        assert np.linalg.norm(body.T_world_body[r.index, :3, 3] - vio.estimate.state.T_world_body.t) < 0.06
