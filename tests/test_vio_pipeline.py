@@ -14,11 +14,12 @@ import pytest
 
 from amrvio.app.run import RunResult, run
 from amrvio.config import PipelineConfig
+from amrvio.estimator.vio_types import EstimateKind
 from amrvio.io.dataset import open_dataset
 from amrvio.io.trajectory import read_trajectory
 from amrvio.pipeline.records import PoseStatus
 from amrvio.pipeline.run_eval import yaw_alignment
-from amrvio.pipeline.vio_report import VIO_COLUMNS, VioPhase
+from amrvio.pipeline.vio_report import UNTRACKED, VIO_COLUMNS, VioPhase
 from amrvio.sim.simulate import SimConfig, simulate
 
 
@@ -110,3 +111,53 @@ def test_yaw_alignment_recovers_a_known_rotation_about_gravity_scale_and_offset(
     line = np.stack([np.linspace(0, 2, 20), np.zeros(20), np.zeros(20)], axis=1)
     al = yaw_alignment(line @ Rz.T * 0.5, line)
     assert al["scale"] == pytest.approx(2.0) and al["yaw_deg"] == pytest.approx(-np.degrees(yaw), abs=1e-6)
+
+
+@pytest.fixture(scope="module")
+def burst_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[RunResult, Path]:
+    """A drive with a 0.5 s yaw burst of about 30 px of smear, rendered with the blur."""
+    seq = tmp_path_factory.mktemp("vio_burst") / "seq"
+    simulate(SimConfig(motion="forward-stop-turn", seconds=4.5, width=376, height=240, fps=10.0, seed=3,
+                       blur_bursts="2.5:0.5:10"), seq)
+    return run(str(seq), out=tmp_path_factory.mktemp("vio_burst_out"), report=False), seq
+
+
+def test_frames_the_vio_bridges_for_smear_keep_the_tracks_through_a_blur_burst(
+        burst_run: tuple[RunResult, Path]) -> None:
+    res, seq = burst_run
+    limit = PipelineConfig().vio.max_smear_px
+    # the gate sees the gyro's smear before tracking; the record has the translation's added
+    smeared = [r.index for r in res.records if r.diagnostics is not None and
+               (r.diagnostics.blur.smear_px_pred or 0.0) > 2 * limit]
+    gated = [r for r in res.records if "smear_gated" in r.events]
+    assert len(smeared) >= 3 and set(smeared) <= {r.index for r in gated}
+    for r in gated:  # the tracker leaves its tracks where the last sharp image had them
+        assert r.tracking is not None and r.tracking.outcome in UNTRACKED, r
+        assert r.status is PoseStatus.BRIDGED
+    # KLT through the smear would lose the map (a new VO segment after the burst) and the smoother
+    # would come back seeing none of its landmarks
+    assert not any(e.startswith("lost:") for r in res.records for e in r.events)
+    assert {r.segment for r in res.records if r.segment is not None} == {0}
+    gt = open_dataset(str(seq)).groundtruth
+    assert gt is not None and res.output.body is not None
+    t_s = np.array([r.t_ns for r in res.records]) * 1e-9
+    al = yaw_alignment(res.output.body.T_world_body[:, :3, 3], gt.interpolated_at(t_s).positions_m)
+    assert al["ate_m"] < 0.05, al
+
+
+def test_a_rejected_update_gives_its_frame_the_state_the_smoother_restarts_from(
+        burst_run: tuple[RunResult, Path]) -> None:
+    res, _ = burst_run
+    body = res.output.body
+    assert body is not None
+    for r in res.records:
+        vio = r.estimator.vio
+        if vio is None or vio.checks is None or vio.checks.ok:
+            continue
+        # the failed checks re-initialise at the IMU prediction; the optimised state they rejected
+        # (and the window it moved) must not become the frame's pose: the restart's state does,
+        # refined by the restarted smoother within its prior (2 cm)
+        assert any(e.startswith("vio_reinit:") for e in r.events)
+        assert vio.estimate is not None and vio.estimate.kind is EstimateKind.INITIAL
+        assert vio.estimate.state is not None
+        assert np.linalg.norm(body.T_world_body[r.index, :3, 3] - vio.estimate.state.T_world_body.t) < 0.06

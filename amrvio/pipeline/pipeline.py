@@ -57,8 +57,8 @@ class Pipeline:
     ``camera``: the camera model (images are undistorted to its pinhole before tracking; the
     diagnostics see the raw image), or a pinhole ``K`` (3x3) for undistorted images.
     ``diagnostics``: the FrameDiagnostics stage (None: off; see ``pipeline.diagnose``).
-    The blur gate scores every image with ``diagnostics.blur.blur_score`` and the diagnostics'
-    BlurScorerConfig; the health record's blur flag also counts the gyro-predicted smear.
+    The blur gate scores every image with ``diagnostics.blur.blur_score`` (BlurScorerConfig); with
+    VIO it also gates the frames the VIO bridges for their gyro-predicted smear (VioStage.smeared).
     """
 
     def __init__(self, camera: CameraModel | F64, config: PipelineConfig | None = None,
@@ -106,8 +106,7 @@ class Pipeline:
             image = np.asarray(cam.undistort_image(image), dtype=np.uint8)
             undistorted = True
             self._toc("undistort", t0)
-        t0 = time.perf_counter()
-        # the diagnostics scored this very image already, unless it was undistorted since
+        t0 = time.perf_counter()  # the diagnostics scored this image already, unless undistorted since
         score = health.blur.score if health is not None and not undistorted else blur_score(image)
         events: list[str] = []
         if no_signal(image):
@@ -118,7 +117,8 @@ class Pipeline:
             events.append("no_signal")
         else:
             blur = self.blur.update(score)
-            blurred = bool(blur.is_blurred) and self.cfg.blur_gating
+            smeared = self.sensors.vio is not None and self.sensors.vio.smeared(health, events)
+            blurred = (bool(blur.is_blurred) or smeared) and self.cfg.blur_gating
         self._toc("blur", t0)
         if not self.cfg.track:
             rec = FrameRecord(index, t_ns, PoseStatus.LOST, None, None, None, 1.0, (), blur, health,

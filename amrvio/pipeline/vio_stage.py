@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.diagnostics.frame import FrameDiagnostics
+from amrvio.diagnostics.health import FrameHealth
 from amrvio.estimator.local_mapping import LocalMapping, Segment
 from amrvio.estimator.vi_init import (
     ViBiasPrior,
@@ -149,6 +150,18 @@ class VioStage:
         self.imu.add(imu)
         return imu
 
+    def smeared(self, health: FrameHealth | None, events: list[str]) -> bool:
+        """Whether the gyro-predicted smear of a frame, known before tracking, is above
+        ``max_smear_px`` (logged as ``smear_gated``): the stage bridges such a frame, and the
+        tracker must not move its tracks through it either. KLT in a smear loses most tracks and
+        starts new ones on smeared corners; the smoother would come back from the burst seeing
+        none of its landmarks, its scale held only by the IMU over a few frames."""
+        smear = None if health is None else health.blur.smear_px_pred
+        if smear is None or not smear > self.cfg.max_smear_px:
+            return False
+        events.append("smear_gated")
+        return True
+
     def process(self, index: int, inp: VioFrameInput, events: list[str]) -> VioReport:
         """The frame's report; its body pose goes into :attr:`track`; events are appended."""
         imu = self.frame_imu(inp.t_ns, inp.imu)
@@ -177,8 +190,6 @@ class VioStage:
             self.track.set(index, inp.t_ns, pred.T_world_body, bridged=True)
             self._reinit(pred, obs, imu, landmarks)
             return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
-        self.track.set(index, inp.t_ns, est.state.T_world_body)
-        self.track.update(self.backend.window())
         self.track.consistent = res.checks is None or res.checks.ok
         if res.checks is not None and not res.checks.ok and self.cfg.reinit_on_check_failure:
             failed = [c.value for c in res.checks.failed]
@@ -187,7 +198,14 @@ class VioStage:
             if any(c.startswith("bias") for c in failed):
                 # a bias that ran away would stay: restart from the initialisation's biases
                 base = dataclasses.replace(base, bias=self._initial_bias(base.bias))
-            self._reinit(base, obs, imu, landmarks)
+            # the rejected update gives no pose: neither to this frame nor to the window's frames
+            # (it moved them too); the frame is the restarted smoother's first state
+            self.track.set(index, inp.t_ns, base.T_world_body)
+            restart = self._reinit(base, obs, imu, landmarks)
+            return VioReport(VioPhase.VIO, restart, res.keyframe, last_init=self.last_init, checks=res.checks,
+                             init_kind=self.kind)
+        self.track.set(index, inp.t_ns, est.state.T_world_body)
+        self.track.update(self.backend.window())
         return VioReport(VioPhase.VIO, est, res.keyframe, last_init=self.last_init, checks=res.checks,
                          init_kind=self.kind)
 
@@ -365,14 +383,14 @@ class VioStage:
         return scale, res
 
     def _reinit(self, base: InertialState, obs: VisualObservations, imu: ImuData,
-                landmarks: tuple[I64, F64]) -> None:
+                landmarks: tuple[I64, F64]) -> VioEstimate:
         """Restart the smoother at ``base`` with loose priors, keeping the landmarks it had before
-        the failed update (they hold the scale) with a loose prior too."""
+        the failed update (they hold the scale) with a loose prior too; returns its first estimate."""
         sig = PriorSigmas(rotation_rad=0.02, position_m=0.02, velocity_m_s=0.2, gyro_bias_rad_s=0.01,
                           accel_bias_m_s2=0.2, landmark_m=0.1)
         ids, X = landmarks
-        self.backend.initialise(VioInitialState(base, sig, ids, X), imu, obs)
         self.kind = "reinit"
+        return self.backend.initialise(VioInitialState(base, sig, ids, X), imu, obs)
 
 
 __all__ = ["BodyTrack", "ImuSetup", "SensorStages", "VioFrameInput", "VioStage", "VioStageConfig", "VoAnchor",
