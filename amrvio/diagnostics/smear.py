@@ -245,14 +245,36 @@ def predict_smear(
         raise ShapeError(f"exposure_s must be finite and >= 0, got {exposure_s}")
     half = int(round(exposure_s * 0.5e9))
     t0, t1 = int(t_mid_ns) - half, int(t_mid_ns) + half
-    knots = np.linspace(t0, t1, PATH_STEPS + 1).round().astype(np.int64)
-    Rs = [np.eye(3)]
-    for a, b in zip(knots[:-1], knots[1:], strict=True):
-        Rs.append(Rs[-1] @ integrate_gyro(stamps_ns, gyro_rad_s, int(a), int(b), R_cam_body,
-                                          gyro_bias_rad_s))
+    Rs = _rotations_at(stamps_ns, gyro_rad_s, np.linspace(t0, t1, PATH_STEPS + 1).round(),
+                       R_cam_body, gyro_bias_rad_s)
     t = np.asarray(stamps_ns)
     n_imu = int(np.count_nonzero((t >= t0) & (t <= t1)))
-    return _prediction(camera, np.stack(Rs), exposure_s, grid, motion, n_imu)
+    return _prediction(camera, Rs, exposure_s, grid, motion, n_imu)
+
+
+def _rotations_at(stamps_ns: NDArray[np.int64], gyro_rad_s: F64, at_ns: F64, R_cam_body: F64 | None,
+                  gyro_bias_rad_s: F64 | None) -> F64:
+    """(K, 3, 3) rotations ``R_c0_ck`` of the camera from the first of the K increasing times
+    ``at_ns`` to each, integrated as :func:`integrate_gyro` does (one pass over the samples)."""
+    t = np.asarray(stamps_ns, dtype=np.int64)
+    g = np.asarray(gyro_rad_s, dtype=np.float64)
+    if gyro_bias_rad_s is not None:
+        g = g - np.asarray(gyro_bias_rad_s, dtype=np.float64).reshape(1, 3)
+    if R_cam_body is not None:
+        g = g @ np.asarray(R_cam_body, dtype=np.float64).T
+    at = np.asarray(at_ns, dtype=np.int64)
+    knots = np.union1d(at, t[(t > at[0]) & (t < at[-1])])
+    rel = (knots - at[0]).astype(np.float64) * 1e-9
+    ts = (t - at[0]).astype(np.float64) * 1e-9
+    w = np.stack([np.interp(rel, ts, g[:, k]) for k in range(3)], axis=1)
+    steps: F64 = so3_exp(0.5 * (w[1:] + w[:-1]) * np.diff(rel)[:, None]) if knots.size > 1 \
+        else np.zeros((0, 3, 3))
+    R = np.empty((knots.size, 3, 3))
+    R[0] = np.eye(3)
+    for k, Rk in enumerate(steps):
+        R[k + 1] = R[k] @ Rk
+    out: F64 = R[np.searchsorted(knots, at)]
+    return out
 
 
 def predict_smear_from_rates(camera: CameraModel, motion: CameraMotion, exposure_s: float,
@@ -276,19 +298,19 @@ def path_smear_at_pixels(camera: CameraModel, R_c0_ck: F64, uv0: F64, t_c0_ck: F
     if Rs.ndim != 3 or Rs.shape[1:] != (3, 3) or Rs.shape[0] < 1:
         raise ShapeError(f"R_c0_ck must be (K,3,3), got {Rs.shape}")
     rays0 = camera.unproject(uv0)
-    uv_prev = np.asarray(uv0, dtype=np.float64)
-    length = np.zeros(uv_prev.shape[0])
-    for k in range(1, Rs.shape[0]):
-        rays = rays0
-        if t_c0_ck is not None and inverse_depth is not None:
-            t = np.asarray(t_c0_ck, dtype=np.float64)[k].reshape(1, 3)
-            rays = rays0 - np.asarray(inverse_depth, dtype=np.float64).reshape(-1, 1) * t
-        uv = np.full_like(uv_prev, np.nan)
-        ok = np.all(np.isfinite(rays), axis=1)
-        if np.any(ok):
-            uv[ok] = camera.project(rays[ok] @ Rs[k])  # (R^T d)^T = d^T R
-        length = length + np.linalg.norm(uv - uv_prev, axis=1)
-        uv_prev = uv
+    rays = np.broadcast_to(rays0, (Rs.shape[0], *rays0.shape))
+    if t_c0_ck is not None and inverse_depth is not None:
+        rho = np.asarray(inverse_depth, dtype=np.float64).reshape(1, -1, 1)
+        rays = rays - rho * np.asarray(t_c0_ck, dtype=np.float64).reshape(-1, 1, 3)
+    rays = np.einsum("kmi,kij->kmj", rays, Rs)  # (R^T d)^T = d^T R
+    flat = rays.reshape(-1, 3)
+    uv = np.full((flat.shape[0], 2), np.nan)
+    ok = np.all(np.isfinite(flat), axis=1)
+    if np.any(ok):
+        uv[ok] = camera.project(flat[ok])
+    uv = uv.reshape(Rs.shape[0], -1, 2)
+    uv[0] = uv0
+    length: F64 = np.linalg.norm(np.diff(uv, axis=0), axis=2).sum(axis=0)
     return length
 
 
