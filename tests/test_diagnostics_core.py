@@ -185,6 +185,22 @@ def test_integrate_gyro_exact_for_constant_rate_and_extrinsic() -> None:
     assert np.allclose(integrate_gyro(t, g * 0 + 1e-9, 0, 10_000_000), so3_exp(np.full(3, 1e-11)))
 
 
+def test_smear_is_the_path_length_when_the_rotation_turns_back() -> None:
+    # +w for the first half of the exposure, -w for the second: the camera ends where it
+    # started, but each pixel swept out and back. At the principal point of a pinhole turning
+    # about its y axis, u = cx + f tan(theta): the path is 2 f tan(w T / 2); the start-to-end
+    # distance would be 0.
+    cam = PinholeCamera(376, 240, 230.0, 230.0, 188.0, 120.0)
+    w, T, t_mid = 2.0, 0.02, 1_000_000_000
+    t = np.arange(t_mid - 20_000_000, t_mid + 20_000_001, 100_000, dtype=np.int64)
+    g = np.zeros((t.size, 3))
+    g[:, 1] = np.where(t <= t_mid, w, -w)
+    p = predict_smear(cam, t, g, t_mid, T)
+    assert p.center_px == pytest.approx(2 * cam.fx * np.tan(w * T / 2), rel=0.01)
+    assert p.max_px >= p.center_px and p.rotation_max_px == p.max_px
+    assert np.linalg.norm(p.omega_cam_rad_s) < 0.02 * w  # the net rotation is ~0
+
+
 def test_smear_with_distortion_uses_camera_model() -> None:
     cam = RadTanCamera(752, 480, 458.654, 457.296, 367.215, 248.375, -0.2834, 0.0740, 0.0002, 0.0)
     R = so3_exp(np.array([0.0, 0.01, 0.0]))

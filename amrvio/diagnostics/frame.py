@@ -41,6 +41,7 @@ from amrvio.diagnostics.health import (
     ParallaxHealth,
     health_rows,
 )
+from amrvio.diagnostics.imu_vo_velocity import imu_velocity
 from amrvio.diagnostics.parallax import (
     ParallaxReference,
     ParallaxReferenceConfig,
@@ -165,9 +166,7 @@ class FrameDiagnostics:
     ) -> None:
         self.config = config or DiagnosticsConfig()
         self.camera = camera
-        self.R_cam_body: F64 | None = (
-            None if T_body_cam is None else np.asarray(T_body_cam.rot.matrix().T)
-        )
+        self.T_body_cam = T_body_cam
         self.inverse_response = inverse_response
         self.gyro_bias = gyro_bias_rad_s
         self._blur = BlurScorer(self.config.blur)
@@ -178,6 +177,11 @@ class FrameDiagnostics:
         self._prev: _Previous | None = None
         self._ref = ParallaxReference()
         self._index = 0
+
+    @property
+    def R_cam_body(self) -> F64 | None:
+        """The rotation of body (IMU) vectors into the camera frame (None without an extrinsic)."""
+        return None if self.T_body_cam is None else np.asarray(self.T_body_cam.rot.matrix().T)
 
     # ------------------------------------------------------------------------------------------
     def _lk(self, width: int) -> LkTracker:
@@ -225,7 +229,10 @@ class FrameDiagnostics:
         :mod:`~amrvio.diagnostics.vo_motion`); unchanged without a camera or a motion."""
         if self.camera is None:
             return health
-        motion = self._poses.camera_motion(health.t_ns, pose_of, points_world, self.camera)
+        T_bc = self.T_body_cam
+        velocity = None if T_bc is None else imu_velocity(
+            ImuData(self._imu.t, self._imu.g, self._imu.a), self.R_cam_body, T_bc.t, self.gyro_bias)
+        motion = self._poses.camera_motion(health.t_ns, pose_of, points_world, self.camera, velocity)
         return health if motion is None else self.with_motion(health, motion)
 
     def with_pose_motion(self, health: FrameHealth, T_cam_world: F64, v_cam: F64,

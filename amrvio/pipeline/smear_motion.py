@@ -9,8 +9,9 @@ tracked the pipeline adds the camera's translation, from one of two sources:
    blur bursts and tracking losses. It is used only while its newest update passed its
    consistency checks and its velocity's standard deviation is at most ``MAX_REL_SIGMA`` of the
    speed (or ``MAX_SIGMA_M_S``): after a re-initialisation its velocity can be far off;
-2. otherwise the VO: the velocity differenced from its recent sharp poses and the depths of its
-   tracked map points (:mod:`amrvio.diagnostics.vo_motion`).
+2. otherwise the VO: the velocity from its recent sharp poses (with the IMU's accelerometer in
+   between when there is one, in the VO's units) and the depths of its tracked map points
+   (:mod:`amrvio.diagnostics.vo_motion`).
 
 Measured on the simulator (376x240, 6 s, ``bench/bench_diagnostics.py``'s smear protocol): with
 the VO alone, the frames of a yaw burst in forward-stop-turn read 31-63 % low (the VO lost them);
