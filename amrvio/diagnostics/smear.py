@@ -161,20 +161,7 @@ def integrate_gyro(
         raise ShapeError("integrate_gyro needs at least one gyro sample")
     if t1_ns < t0_ns:
         raise ShapeError(f"window end {t1_ns} is before its start {t0_ns}")
-    if gyro_bias_rad_s is not None:
-        g = g - np.asarray(gyro_bias_rad_s, dtype=np.float64).reshape(1, 3)
-    if R_cam_body is not None:
-        g = g @ np.asarray(R_cam_body, dtype=np.float64).T
-    inside = t[(t > t0_ns) & (t < t1_ns)]
-    knots = np.concatenate([[t0_ns], inside, [t1_ns]]).astype(np.int64)
-    rel = (knots - t0_ns).astype(np.float64) * 1e-9
-    ts = (t - t0_ns).astype(np.float64) * 1e-9
-    w = np.stack([np.interp(rel, ts, g[:, k]) for k in range(3)], axis=1)
-    dt = np.diff(rel)
-    steps = 0.5 * (w[1:] + w[:-1]) * dt[:, None]
-    R = np.eye(3)
-    for Rk in so3_exp(steps) if steps.shape[0] else ():
-        R = R @ Rk
+    R: F64 = _rotations_at(t, g, np.array([t0_ns, t1_ns]), R_cam_body, gyro_bias_rad_s)[-1]
     return R
 
 
@@ -255,7 +242,8 @@ def predict_smear(
 def _rotations_at(stamps_ns: NDArray[np.int64], gyro_rad_s: F64, at_ns: F64, R_cam_body: F64 | None,
                   gyro_bias_rad_s: F64 | None) -> F64:
     """(K, 3, 3) rotations ``R_c0_ck`` of the camera from the first of the K increasing times
-    ``at_ns`` to each, integrated as :func:`integrate_gyro` does (one pass over the samples)."""
+    ``at_ns`` to each, in one pass over the samples (see :func:`integrate_gyro`: interpolated
+    rates, the exact exponential of each interval's midpoint rate)."""
     t = np.asarray(stamps_ns, dtype=np.int64)
     g = np.asarray(gyro_rad_s, dtype=np.float64)
     if gyro_bias_rad_s is not None:
