@@ -30,7 +30,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from amrvio.types.lie import so3_exp
+from amrvio.diagnostics.smear import rotations_at
 from amrvio.types.sensors import ImuData
 
 F64 = NDArray[np.float64]
@@ -66,12 +66,8 @@ def imu_vo_velocity(poses: list[tuple[int, F64]], t_ns: int, imu: ImuData, R_cam
     w = np.stack([np.interp(rel, ts_rel, g[:, k]) for k in range(3)], axis=1)
     f = np.stack([np.interp(rel, ts_rel, a[:, k]) for k in range(3)], axis=1)
     # attitude Q_k = R_b0_bk by the gyro (midpoint rate, exact exponential per step)
+    Q = rotations_at(ts, g, grid, None, None)
     dt = np.diff(rel)
-    steps = so3_exp(0.5 * (w[1:] + w[:-1]) * dt[:, None])
-    Q = np.empty((grid.size, 3, 3))
-    Q[0] = np.eye(3)
-    for k in range(1, grid.size):
-        Q[k] = Q[k - 1] @ steps[k - 1]
     idx = np.searchsorted(grid, t_pose)
     i_now = int(np.searchsorted(grid, t_ns))
     T_last = np.asarray(poses[-1][1], dtype=np.float64)

@@ -161,7 +161,7 @@ def integrate_gyro(
         raise ShapeError("integrate_gyro needs at least one gyro sample")
     if t1_ns < t0_ns:
         raise ShapeError(f"window end {t1_ns} is before its start {t0_ns}")
-    R: F64 = _rotations_at(t, g, np.array([t0_ns, t1_ns]), R_cam_body, gyro_bias_rad_s)[-1]
+    R: F64 = rotations_at(t, g, np.array([t0_ns, t1_ns]), R_cam_body, gyro_bias_rad_s)[-1]
     return R
 
 
@@ -232,14 +232,14 @@ def predict_smear(
         raise ShapeError(f"exposure_s must be finite and >= 0, got {exposure_s}")
     half = int(round(exposure_s * 0.5e9))
     t0, t1 = int(t_mid_ns) - half, int(t_mid_ns) + half
-    Rs = _rotations_at(stamps_ns, gyro_rad_s, np.linspace(t0, t1, PATH_STEPS + 1).round(),
+    Rs = rotations_at(stamps_ns, gyro_rad_s, np.linspace(t0, t1, PATH_STEPS + 1).round(),
                        R_cam_body, gyro_bias_rad_s)
     t = np.asarray(stamps_ns)
     n_imu = int(np.count_nonzero((t >= t0) & (t <= t1)))
     return _prediction(camera, Rs, exposure_s, grid, motion, n_imu)
 
 
-def _rotations_at(stamps_ns: NDArray[np.int64], gyro_rad_s: F64, at_ns: F64, R_cam_body: F64 | None,
+def rotations_at(stamps_ns: NDArray[np.int64], gyro_rad_s: F64, at_ns: F64, R_cam_body: F64 | None,
                   gyro_bias_rad_s: F64 | None) -> F64:
     """(K, 3, 3) rotations ``R_c0_ck`` of the camera from the first of the K increasing times
     ``at_ns`` to each, in one pass over the samples (see :func:`integrate_gyro`: interpolated
