@@ -150,7 +150,7 @@ class Pipeline:
                 step.tracking.outcome not in ROUGH_POSES
             diag.observe_pose(t_ns, index if tracked else None, seg)
             m = self.mapping.current.mapper.map if self.tracker.mapped and seg is not None else None
-            health = with_translation(diag, health, self.sensors.vio, t_ns, imu, m, self.tracker.tracks.ids,
+            health = with_translation(diag, health, self.sensors.vio, t_ns, imu, m, self.tracker.tracks,
                                       lambda i: None if m is None else self.composer.pose_in_segment(i, seg, m))
         kf = (self._segment_id() or 0, step.keyframe.kf_id) if step.keyframe is not None else None
         t0 = time.perf_counter()

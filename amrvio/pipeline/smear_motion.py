@@ -29,6 +29,7 @@ from amrvio.diagnostics.frame import FrameDiagnostics
 from amrvio.diagnostics.health import FrameHealth
 from amrvio.estimator.vo_map import VoMap
 from amrvio.frontend.tracker import TrackOutcome
+from amrvio.frontend.tracks import TrackSet
 from amrvio.pipeline.vio_stage import VioStage
 from amrvio.types.sensors import ImuData
 
@@ -42,13 +43,16 @@ ROUGH_POSES = (TrackOutcome.TRACKED_BLURRED, TrackOutcome.PREDICTED, TrackOutcom
 frames (PnP on blurred tracks, the motion model, direct alignment)."""
 
 
-def vio_camera_motion(stage: VioStage, t_ns: int, imu: ImuData | None) -> tuple[F64, F64, F64] | None:
+def vio_camera_motion(stage: VioStage, t_ns: int, imu: ImuData | None,
+                      tracks: TrackSet) -> tuple[F64, F64, F64] | None:
     """The camera's motion at ``t_ns`` as the running smoother predicts it from its newest state
     and the IMU since (``imu``: the frame's samples, added to the stage's log): ``T_cam_world``
     (4x4, metric world), the velocity of the camera centre in the camera frame (m/s) and the
-    window's landmarks (L, 3), world metres. None before the start, when the IMU does not reach
-    ``t_ns``, or when the estimate is not to be trusted with it (see the module docstring). The
-    prediction is the one the stage starts from for the same frame (propagation is idempotent)."""
+    window's landmarks (L, 3), world metres, less those that a live track of ``tracks`` puts
+    beyond the smoother's gate (:meth:`VioBackend.landmarks_agreeing`). None before the start,
+    when the IMU does not reach ``t_ns``, or when the estimate is not to be trusted with it (see
+    the module docstring). The prediction is the one the stage starts from for the same frame
+    (propagation is idempotent)."""
     if not stage.running or not stage.track.consistent:
         return None
     span = stage.frame_imu(t_ns, imu)
@@ -67,22 +71,22 @@ def vio_camera_motion(stage: VioStage, t_ns: int, imu: ImuData | None) -> tuple[
     w_body = np.asarray(span.gyro_rad_s[k]) - np.asarray(st.bias.gyro_rad_s)
     t_bc = np.asarray(stage.setup.T_body_cam.t)
     v_cam_world = np.asarray(st.v_world_m_s) + st.T_world_body.R @ np.cross(w_body, t_bc)
-    _, X = stage.backend.landmarks()
+    X = stage.backend.landmarks_agreeing(T_wc, tracks.ids, tracks.pts)
     return T_wc.inverse().matrix(), T_wc.R.T @ v_cam_world, X
 
 
 def with_translation(diag: FrameDiagnostics, health: FrameHealth, vio: VioStage | None, t_ns: int,
-                     imu: ImuData | None, vo_map: VoMap | None, track_ids: I64,
+                     imu: ImuData | None, vo_map: VoMap | None, tracks: TrackSet,
                      pose_of: Callable[[int], F64 | None]) -> FrameHealth:
     """``health`` with the smear's translational part: the VIO's motion when it has one, else
-    the VO's (``vo_map``: the current map, None before one; ``track_ids``: the live tracks,
+    the VO's (``vo_map``: the current map, None before one; ``tracks``: the live tracks,
     whose map points give the depths; ``pose_of``: a tracked frame's current ``T_cam_world`` in
     the map, see :meth:`FrameDiagnostics.with_vo_motion`)."""
-    motion = None if vio is None else vio_camera_motion(vio, t_ns, imu)
+    motion = None if vio is None else vio_camera_motion(vio, t_ns, imu, tracks)
     if motion is not None:
         health = diag.with_pose_motion(health, *motion)
     if health.blur.smear_px_translation is None and vo_map is not None:
-        points = vo_map.xyz[track_ids[vo_map.points_of(track_ids)]]
+        points = vo_map.xyz[tracks.ids[vo_map.points_of(tracks.ids)]]
         health = diag.with_vo_motion(health, pose_of, points)
     return health
 

@@ -109,6 +109,30 @@ def test_window_holds_the_smoothed_keyframes() -> None:
         assert np.linalg.norm(st.T_world_body.t - truth.T_world_body.t) < 0.02
 
 
+def test_landmarks_agreeing_drops_those_a_track_puts_beyond_the_gate() -> None:
+    """The smear's depths (issue 13) come from the window's landmarks less those a live track
+    contradicts: with the true camera and noiseless pixels every observed landmark agrees; a
+    track moved 15 px (beyond the 10 px gate) removes its landmark and only it; one moved 5 px
+    does not; landmarks without a track stay."""
+    sc = _scenario("handheld", 3.0, seed=2)
+    be = start(sc)
+    run_frames(sc, be, 0.0, 2.0)
+    ids, X = be.landmarks()
+    assert len(ids) > 20
+    T_wc = sc.true_state(2.0).T_world_body @ sc.T_body_cam
+    pc = (X - T_wc.t) @ T_wc.R
+    uv = pc[:, :2] / pc[:, 2:] @ K_EUROC[:2, :2].T + K_EUROC[:2, 2]
+    kept = be.landmarks_agreeing(T_wc, ids, uv)
+    np.testing.assert_array_equal(kept, X)
+    moved = uv.copy()
+    moved[3] += (15.0, 0.0)
+    moved[7] += (0.0, 5.0)
+    kept = be.landmarks_agreeing(T_wc, ids, moved)
+    np.testing.assert_array_equal(kept, np.delete(X, 3, axis=0))
+    untracked = be.landmarks_agreeing(T_wc, ids[5:], moved[5:])  # landmark 3 has no track now
+    np.testing.assert_array_equal(untracked, X)
+
+
 # ------------------------------------------------------------------ bridging
 
 
