@@ -24,6 +24,7 @@ from amrvio.estimator.scale_sources import ScaleConfig
 from amrvio.frontend.tracker import TrackingConfig
 from amrvio.pipeline.recovery import RecoveryConfig
 from amrvio.pipeline.vio_report import VioStageConfig
+from amrvio.tracking.lk import reduction_levels
 
 #: nested fields that the top-level ``seed`` replaces
 _SEED = "seed"
@@ -52,6 +53,41 @@ class PipelineConfig:
     scale: ScaleConfig = field(default_factory=ScaleConfig)
     output: OutputConfig = field(default_factory=OutputConfig)
     vio: VioStageConfig = field(default_factory=VioStageConfig)
+
+
+#: the gates that bound a tracking or reprojection error, in pixels of the image the tracker works
+#: on (``in_tracked_pixels``); gates on the size of a motion (flow, parallax, search radius) stay
+#: in image pixels: a motion of N image pixels is the same angle at any tracking level
+NOISE_GATES_PX: tuple[str, ...] = (
+    "tracking.klt.fb_thresh_px", "tracking.klt.ransac_thresh_px", "tracking.pnp_thresh_px",
+    "tracking.huber_px", "tracking.rotation_max_px", "init.two_view.ransac_thresh_px",
+    "init.two_view.max_reproj_px", "init.pnp_thresh_px", "recovery.reloc.pnp_thresh_px",
+    "mapping.anchor.max_shift_px", "mapping.mapper.huber_px", "mapping.mapper.cull_px",
+    "mapping.mapper.tri_max_reproj_px",
+)
+
+
+def in_tracked_pixels(cfg: PipelineConfig, image_width: int | None) -> PipelineConfig:
+    """``cfg`` as the stages use it on images ``image_width`` pixels wide: every gate of
+    :data:`NOISE_GATES_PX` multiplied by the image pixels per pixel of the pyramid level the KLT
+    tracks on (``tracking.klt.max_width_px``: 2 for a 1920-pixel-wide phone video, 1 up to 1280
+    wide). A track is as precise as a fraction of a pixel of the image it was tracked in; with
+    the gates in image pixels, the 1080p phone's forward-backward check, PnP and triangulation
+    gates were half as wide, relative to that precision, as on KITTI or EuRoC. ``cfg`` itself
+    when the images are tracked at full resolution (or ``image_width`` is None: unknown)."""
+    px_scale = 1 if image_width is None else 2 ** reduction_levels(image_width, cfg.tracking.klt.max_width_px)
+    if px_scale == 1:
+        return cfg
+
+    def scaled(node: Any, path: list[str]) -> Any:
+        head, rest = path[0], path[1:]
+        value = getattr(node, head)
+        return dataclasses.replace(node, **{head: value * px_scale if not rest else scaled(value, rest)})
+
+    out = cfg
+    for dotted in NOISE_GATES_PX:
+        out = scaled(out, dotted.split("."))
+    return out
 
 
 #: one line of help per field, by dotted path; `amrvio config --dump` prints them as comments
@@ -412,5 +448,5 @@ def without_photometric(cfg: PipelineConfig) -> PipelineConfig:
         mapping=dataclasses.replace(mp, anchor=dataclasses.replace(mp.anchor, photometric=False)))
 
 
-__all__ = ["HELP", "OutputConfig", "PipelineConfig", "all_keys", "config_from_dict", "config_to_dict",
-           "dump_config", "load_config", "without_photometric"]
+__all__ = ["HELP", "NOISE_GATES_PX", "OutputConfig", "PipelineConfig", "all_keys", "config_from_dict",
+           "config_to_dict", "dump_config", "in_tracked_pixels", "load_config", "without_photometric"]

@@ -14,17 +14,20 @@ import yaml
 
 from amrvio.config import (
     HELP,
+    NOISE_GATES_PX,
     PipelineConfig,
     all_keys,
     config_from_dict,
     config_to_dict,
     dump_config,
+    in_tracked_pixels,
     load_config,
     without_photometric,
 )
 from amrvio.errors import ConfigError
 from amrvio.estimator.scale_sources import CameraHeightScale
 from amrvio.pipeline.pipeline import Pipeline
+from amrvio.types.camera import PinholeCamera
 
 
 def test_every_key_has_help_and_no_help_is_stale() -> None:
@@ -131,3 +134,36 @@ def test_cli_run_refuses_a_bad_config_before_any_work(tmp_path: Path) -> None:
     assert r.stderr.strip().count("\n") == 0
     assert "mapping.mapper.ba_window" in r.stderr
     assert not out.exists()
+
+
+def test_noise_gates_are_in_pixels_of_the_tracked_level() -> None:
+    """A 1920-wide video is tracked one pyramid level down (max_width_px 1280): every noise gate
+    doubles and nothing else changes; up to 1280 wide (KITTI 1241, EuRoC 752) or with no width
+    the configuration is returned as it is."""
+    cfg = PipelineConfig()
+    for width in (None, 752, 1241, 1280):
+        assert in_tracked_pixels(cfg, width) is cfg
+    out = in_tracked_pixels(cfg, 1920)
+    before, after = config_to_dict(cfg), config_to_dict(out)
+
+    def leaves(d: dict, prefix: str = "") -> dict:
+        flat: dict = {}
+        for k, v in d.items():
+            flat.update(leaves(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v})
+        return flat
+
+    b, a = leaves(before), leaves(after)
+    assert set(NOISE_GATES_PX) <= set(b)
+    for key in b:
+        assert a[key] == (2 * b[key] if key in NOISE_GATES_PX else b[key]), key
+    assert in_tracked_pixels(cfg, 2600).tracking.pnp_thresh_px == 4 * cfg.tracking.pnp_thresh_px  # two levels
+
+
+def test_the_pipeline_gives_its_stages_the_gates_of_the_tracked_level() -> None:
+    """The user's configuration stays as given; the stages of a 1920-wide camera get it in
+    tracked pixels (the PnP gate doubled), those of a 752-wide one unchanged."""
+    for width, factor in ((1920, 2.0), (752, 1.0)):
+        cam = PinholeCamera(width=width, height=480, fx=500.0, fy=500.0, cx=width / 2, cy=240.0)
+        pipe = Pipeline(cam)
+        assert pipe.cfg == PipelineConfig()
+        assert pipe.tracker.cfg.pnp_thresh_px == factor * PipelineConfig().tracking.pnp_thresh_px

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from amrvio.config import PipelineConfig
+from amrvio.config import PipelineConfig, in_tracked_pixels
 from amrvio.diagnostics.blur import BlurResult, BlurScorer, blur_score, no_signal
 from amrvio.diagnostics.frame import FrameDiagnostics, FrameHealth
 from amrvio.estimator.camera_height import HeightEstimate
@@ -64,9 +64,9 @@ class Pipeline:
     def __init__(self, camera: CameraModel | F64, config: PipelineConfig | None = None,
                  diagnostics: FrameDiagnostics | None = None, imu: ImuSetup | None = None,
                  wheel: WheelData | None = None) -> None:
-        cfg = config or PipelineConfig()
-        self.cfg = cfg
+        self.cfg = config or PipelineConfig()
         self.camera = camera if isinstance(camera, CameraModel) else None
+        cfg = in_tracked_pixels(self.cfg, None if self.camera is None else self.camera.width)
         K = np.asarray(camera.pinhole().K if isinstance(camera, CameraModel) else camera,
                        dtype=np.float64)
         tracking = cfg.tracking

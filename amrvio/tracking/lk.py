@@ -129,10 +129,7 @@ class LkTracker:
         if img.ndim != 2 or img.dtype != np.uint8:
             raise ShapeError(f"expected an (H, W) uint8 image, got {img.shape} {img.dtype}")
         cfg = self.config
-        levels = 0
-        if cfg.max_width_px is not None:
-            while (img.shape[1] >> levels) > cfg.max_width_px:
-                levels += 1
+        levels = reduction_levels(img.shape[1], cfg.max_width_px)
         lk = normalise_for_tracking(img) if cfg.invariance is Invariance.NORMALISE else img
         for _ in range(levels):
             if cfg.reduce_by_area:
@@ -209,6 +206,17 @@ class LkTracker:
         return TrackResult(p1f, ok, bright, n_fb, n_epi)
 
 
+def reduction_levels(width: int, max_width_px: int | None) -> int:
+    """Pyramid levels an image ``width`` pixels wide is reduced by before LK runs on it: the
+    first level at most ``max_width_px`` wide (0 for None); the tracked pixel is ``2**levels``
+    image pixels."""
+    levels = 0
+    if max_width_px is not None:
+        while (int(width) >> levels) > max_width_px:
+            levels += 1
+    return levels
+
+
 def _to_lk(p: NDArray[np.floating], scale: int) -> F32:
     """(N, 2) full-resolution pixels -> (N, 1, 2) float32 pixels of the LK image."""
     q = p if scale == 1 else p / scale
@@ -244,6 +252,7 @@ def _epipolar_reject(p0: F64, p1: F64, ok: NDArray[np.bool_], cfg: EpipolarConfi
 
 __all__ = [
     "EpipolarConfig",
+    "reduction_levels",
     "LkConfig",
     "LkTracker",
     "TrackImage",
