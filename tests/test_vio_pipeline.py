@@ -161,3 +161,41 @@ def test_a_rejected_update_gives_its_frame_the_state_the_smoother_restarts_from(
         assert vio.estimate is not None and vio.estimate.kind is EstimateKind.INITIAL
         assert vio.estimate.state is not None
         assert np.linalg.norm(body.T_world_body[r.index, :3, 3] - vio.estimate.state.T_world_body.t) < 0.06
+
+
+def test_repeated_solver_failures_escalate_instead_of_looping(sim_dir: Path, tmp_path: Path,
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """Three updates in a row that the solver fails: the first restarts the smoother with the
+    landmarks it had, the second without them, the third gives the smoother up (``vio_failed``)
+    until the VO initialises it again; each of the three frames still gets the IMU's pose."""
+    from amrvio.estimator.vio_backend import VioBackend
+    from amrvio.estimator.vio_types import VioEstimate, VioStatus
+    from amrvio.pipeline.vio_stage import VioStage
+
+    calls = {"n": 0}
+    real_add, real_reinit = VioBackend.add_frame, VioStage._reinit
+    seeds: list[int] = []
+
+    def failing_add(self: VioBackend, t_ns: int, *args: object, **kw: object) -> object:
+        res = real_add(self, t_ns, *args, **kw)  # type: ignore[arg-type]
+        calls["n"] += 1
+        if 11 <= calls["n"] <= 13:
+            self._drop_state()
+            est = VioEstimate(t_ns, EstimateKind.SMOOTHED, VioStatus.SOLVER_FAILED)
+            return dataclasses.replace(res, estimate=est, checks=None)
+        return res
+
+    def recording_reinit(self: VioStage, base: object, obs: object, imu: object, landmarks: tuple) -> object:
+        seeds.append(len(landmarks[0]))
+        return real_reinit(self, base, obs, imu, landmarks)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(VioBackend, "add_frame", failing_add)
+    monkeypatch.setattr(VioStage, "_reinit", recording_reinit)
+    res = run(str(sim_dir), out=tmp_path / "out", report=False)
+    solver = [(r.index, e) for r in res.records for e in r.events if "solver_failed" in e]
+    assert [e for _, e in solver] == ["vio_reinit:solver_failed", "vio_reinit:solver_failed",
+                                      "vio_failed:solver_failed"]
+    assert [i for i, _ in solver] == list(range(solver[0][0], solver[0][0] + 3))
+    assert seeds[0] > 0 and seeds[1] == 0  # the landmarks, then none
+    for i, _ in solver:
+        assert res.records[i].status is PoseStatus.BRIDGED

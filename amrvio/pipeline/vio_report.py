@@ -6,7 +6,7 @@ columns in ``health.csv``).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import Enum
 
 import numpy as np
@@ -18,6 +18,7 @@ from amrvio.estimator.vio_checks import ConsistencyReport
 from amrvio.estimator.vio_types import VioEstimate
 from amrvio.frontend.tracker import TrackOutcome
 from amrvio.frontend.tracks import TrackSet
+from amrvio.imu.propagation import InertialState
 from amrvio.imu.static_init import StaticInitResult
 from amrvio.types.lie import SE3
 from amrvio.types.sensors import ImuData, ImuNoise, WheelData
@@ -123,6 +124,30 @@ class ImuSetup:
 
 
 
+@dataclass
+class BodyTrack:
+    """Per frame index: the body pose ``T_world_body`` (4x4) the stage gives it, and frame times;
+    whether the newest smoothed pose passed its consistency checks."""
+
+    poses: dict[int, F64] = field(default_factory=dict)
+    index_of: dict[int, int] = field(default_factory=dict)
+    bridged: set[int] = field(default_factory=set)
+    consistent: bool = False  # the newest smoothed pose passed the consistency checks
+
+    def set(self, index: int, t_ns: int, T_world_body: SE3, bridged: bool = False) -> None:
+        self.index_of[t_ns] = index
+        self.poses[index] = T_world_body.matrix()
+        if bridged:
+            self.bridged.add(index)
+
+    def update(self, states: tuple[tuple[InertialState, bool], ...]) -> None:
+        """The smoother's newer estimates of frames still in its window."""
+        for st, _ in states:
+            i = self.index_of.get(st.t_ns)
+            if i is not None:
+                self.poses[i] = st.T_world_body.matrix()
+
+
 class VioPhase(Enum):
     """Where the visual-inertial stage is at a frame.
 
@@ -205,5 +230,5 @@ def _num(v: float, fmt: str) -> str:
     return format(v, fmt) if math.isfinite(v) else ""
 
 
-__all__ = ["UNTRACKED", "VIO_COLUMNS", "ImuSetup", "VioFrameInput", "VioPhase", "VioReport", "VioStageConfig",
-           "vio_input"]
+__all__ = ["UNTRACKED", "VIO_COLUMNS", "BodyTrack", "ImuSetup", "VioFrameInput", "VioPhase", "VioReport",
+           "VioStageConfig", "vio_input"]

@@ -14,7 +14,8 @@ KLT tracks (ids and undistorted pixels) and the VO keyframe the frame became, if
 3. then every frame's tracks go to :meth:`VioBackend.add_frame`; a frame that is blurred, dropped,
    repeated or lost gets an IMU prediction (``propagate(..., bridged=True)``);
 4. a failed consistency check re-initialises the smoother at its own IMU prediction (logged as a
-   ``vio_reinit`` event); a failed update (IMU gap, solver) goes back to step 2.
+   ``vio_reinit`` event), and so does a solver failure (with the old landmarks, then without);
+   an IMU gap, or ``MAX_SOLVER_FAILURES`` solver failures in a row, go back to step 2.
 
 :class:`BodyTrack` keeps each frame's body pose, updated while its state stays in the window.
 """
@@ -22,7 +23,7 @@ KLT tracks (ids and undistorted pixels) and the VO keyframe the frame became, if
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,7 +51,15 @@ from amrvio.imu.propagation import ImuBias, InertialState
 from amrvio.imu.static_init import StaticInitConfig, StaticInitResult, static_init
 from amrvio.pipeline.imu_log import ImuLog
 from amrvio.pipeline.records import BodyTrajectory, PoseStatus
-from amrvio.pipeline.vio_report import ImuSetup, VioFrameInput, VioPhase, VioReport, VioStageConfig, vio_input
+from amrvio.pipeline.vio_report import (
+    BodyTrack,
+    ImuSetup,
+    VioFrameInput,
+    VioPhase,
+    VioReport,
+    VioStageConfig,
+    vio_input,
+)
 from amrvio.types.lie import SE3, SO3, Sim3
 from amrvio.types.sensors import ImuData
 
@@ -77,6 +86,8 @@ class VoAnchor:
 
 
 STILL_PX = 0.5
+MAX_SOLVER_FAILURES = 3
+"""Consecutive solver failures after which the smoother waits for a new initialisation."""
 """Median track motion (px) since the first frame below which the camera stands still."""
 
 
@@ -88,30 +99,6 @@ class _StaticStart:
     uv: F64 | None = None
     decided: bool = False
     result: StaticInitResult | None = None
-
-
-@dataclass
-class BodyTrack:
-    """Per frame index: the body pose ``T_world_body`` (4x4) the stage gives it, and frame times;
-    whether the newest smoothed pose passed its consistency checks."""
-
-    poses: dict[int, F64] = field(default_factory=dict)
-    index_of: dict[int, int] = field(default_factory=dict)
-    bridged: set[int] = field(default_factory=set)
-    consistent: bool = False  # the newest smoothed pose passed the consistency checks
-
-    def set(self, index: int, t_ns: int, T_world_body: SE3, bridged: bool = False) -> None:
-        self.index_of[t_ns] = index
-        self.poses[index] = T_world_body.matrix()
-        if bridged:
-            self.bridged.add(index)
-
-    def update(self, states: tuple[tuple[InertialState, bool], ...]) -> None:
-        """The smoother's newer estimates of frames still in its window."""
-        for st, _ in states:
-            i = self.index_of.get(st.t_ns)
-            if i is not None:
-                self.poses[i] = st.T_world_body.matrix()
 
 
 class VioStage:
@@ -137,6 +124,7 @@ class VioStage:
         self.anchor: VoAnchor | None = None
         self.track = BodyTrack()
         self.kind = ""
+        self._solver_failures = 0  # consecutive updates the solver failed
 
     @property
     def running(self) -> bool:
@@ -184,12 +172,22 @@ class VioStage:
                 events.append(f"vio_failed:{est.status.value}")
                 self.vo_keyframes.clear()
                 return VioReport(VioPhase.NO_IMU, est, last_init=self.last_init, init_kind=self.kind)
-            # the solver failed: restart at the IMU prediction, with the landmarks it had
-            events.append(f"vio_reinit:{est.status.value}")
+            # the solver failed: restart at the IMU prediction with the landmarks it had; after a
+            # second failure in a row without them (they may be what the solver cannot take); a
+            # third gives the smoother up until the VO initialises it again (no endless loop)
+            self._solver_failures += 1
             self.track.consistent = False
             self.track.set(index, inp.t_ns, pred.T_world_body, bridged=True)
-            self._reinit(pred, obs, imu, landmarks)
+            if self._solver_failures >= MAX_SOLVER_FAILURES:
+                events.append(f"vio_failed:{est.status.value}")
+                self._solver_failures = 0
+                self.vo_keyframes.clear()
+                return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
+            events.append(f"vio_reinit:{est.status.value}")
+            none = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+            self._reinit(pred, obs, imu, landmarks if self._solver_failures == 1 else none)
             return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
+        self._solver_failures = 0
         self.track.consistent = res.checks is None or res.checks.ok
         if res.checks is not None and not res.checks.ok and self.cfg.reinit_on_check_failure:
             failed = [c.value for c in res.checks.failed]
