@@ -127,12 +127,14 @@ class ImuSetup:
 @dataclass
 class BodyTrack:
     """Per frame index: the body pose ``T_world_body`` (4x4) the stage gives it, and frame times;
-    whether the newest smoothed pose passed its consistency checks."""
+    whether the newest smoothed pose passed its consistency checks, and how many updates in a row
+    the solver failed."""
 
     poses: dict[int, F64] = field(default_factory=dict)
     index_of: dict[int, int] = field(default_factory=dict)
     bridged: set[int] = field(default_factory=set)
     consistent: bool = False  # the newest smoothed pose passed the consistency checks
+    solver_failures: int = 0  # consecutive updates the solver failed
 
     def set(self, index: int, t_ns: int, T_world_body: SE3, bridged: bool = False) -> None:
         self.index_of[t_ns] = index

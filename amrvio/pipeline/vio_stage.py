@@ -124,7 +124,6 @@ class VioStage:
         self.anchor: VoAnchor | None = None
         self.track = BodyTrack()
         self.kind = ""
-        self._solver_failures = 0  # consecutive updates the solver failed
 
     @property
     def running(self) -> bool:
@@ -175,19 +174,19 @@ class VioStage:
             # the solver failed: restart at the IMU prediction with the landmarks it had; after a
             # second failure in a row without them (they may be what the solver cannot take); a
             # third gives the smoother up until the VO initialises it again (no endless loop)
-            self._solver_failures += 1
+            self.track.solver_failures += 1
             self.track.consistent = False
             self.track.set(index, inp.t_ns, pred.T_world_body, bridged=True)
-            if self._solver_failures >= MAX_SOLVER_FAILURES:
+            if self.track.solver_failures >= MAX_SOLVER_FAILURES:
                 events.append(f"vio_failed:{est.status.value}")
-                self._solver_failures = 0
+                self.track.solver_failures = 0
                 self.vo_keyframes.clear()
                 return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
             events.append(f"vio_reinit:{est.status.value}")
             none = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
-            self._reinit(pred, obs, imu, landmarks if self._solver_failures == 1 else none)
+            self._reinit(pred, obs, imu, landmarks if self.track.solver_failures == 1 else none)
             return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
-        self._solver_failures = 0
+        self.track.solver_failures = 0
         self.track.consistent = res.checks is None or res.checks.ok
         if res.checks is not None and not res.checks.ok and self.cfg.reinit_on_check_failure:
             failed = [c.value for c in res.checks.failed]
