@@ -86,9 +86,9 @@ class VoAnchor:
 
 
 STILL_PX = 0.5
+"""Median track motion (px) since the first frame below which the camera stands still."""
 MAX_SOLVER_FAILURES = 3
 """Consecutive solver failures after which the smoother waits for a new initialisation."""
-"""Median track motion (px) since the first frame below which the camera stands still."""
 
 
 @dataclass
