@@ -80,14 +80,44 @@ def _accuracy_rows(tag: str, res: RunResult, secs: float, ate_max: float, scale_
     ]
 
 
-def replay(work: Path, quick: bool) -> list[Row]:
-    seq = work / "replay"
-    seconds = 15.0 if quick else 30.0
+#: render seeds of the replay protocol (the room's texture and the sensor noise; the flight and
+#: its IMU are the recording's) and simulator seeds of the forward-stop-turn protocol; the first
+#: of each is the headline run. One run is not a result: on the replay, seed 0 passed the scale
+#: target (0.76 %) while seeds 1-3 gave 1.95-3.02 %.
+REPLAY_SEEDS = (0, 1, 2, 3)
+FST_SEEDS = (0, 1, 2, 3)
+
+
+def _replay_run(work: Path, seconds: float, seed: int) -> tuple[RunResult, float]:
+    seq = work / f"replay{seed}"
     simulate(SimConfig(motion="replay", scene="room", seconds=seconds, trajectory=str(
         V101 / "state_groundtruth_estimate0" / "data.csv"), imu_csv=str(V101 / "imu0" / "data.csv"),
-        cam_extrinsic=str(V101 / "cam0" / "sensor.yaml"), width=W, height=H), seq, force=True)
-    res, secs = _run(seq, work / "replay_out")
-    return _accuracy_rows(f"VIO sim replay V1_01 {seconds:.0f} s 376x240 (recorded IMU)", res, secs, 0.05, 1.0)
+        cam_extrinsic=str(V101 / "cam0" / "sensor.yaml"), width=W, height=H, seed=seed), seq, force=True)
+    return _run(seq, work / f"replay{seed}_out")
+
+
+def replay(work: Path, quick: bool) -> list[Row]:
+    seconds = 15.0 if quick else 30.0
+    tag = f"VIO sim replay V1_01 {seconds:.0f} s 376x240 (recorded IMU)"
+    res, secs = _replay_run(work, seconds, REPLAY_SEEDS[0])
+    rows = _accuracy_rows(tag, res, secs, 0.05, 1.0)
+    if quick:
+        return rows
+    ates, scales = [float(rows[1]["value"])], [float(rows[2]["value"])]  # type: ignore[arg-type]
+    for seed in REPLAY_SEEDS[1:]:
+        ev: dict[str, Any] = _replay_run(work, seconds, seed)[0].eval_summary or {}
+        ates.append(float(ev.get("ate_metric_m") or float("nan")))
+        scales.append(float(ev.get("scale_error_pct") or float("nan")))
+    note = (f"render seeds {list(REPLAY_SEEDS)}: SE3 ATE {[round(a, 4) for a in ates]} m, scale error "
+            f"{[round(x, 2) for x in scales]} %")
+    return rows + [
+        {"name": f"{tag}, protocol over {len(REPLAY_SEEDS)} render seeds: median SE3 ATE",
+         "value": float(np.median(ates)), "unit": "m", "note": note, "target": "<= 0.05 m",
+         "pass": bool(np.median(ates) <= 0.05)},
+        {"name": f"{tag}, protocol over {len(REPLAY_SEEDS)} render seeds: median scale error",
+         "value": float(np.median(scales)), "unit": "%", "note": note, "target": "<= 1.0 %",
+         "pass": bool(np.median(scales) <= 1.0)},
+    ]
 
 
 def mh01(work: Path) -> list[Row]:
@@ -124,11 +154,17 @@ def _causal_scale_time(res: RunResult, data: Path) -> tuple[float, float]:
     return float(t[k_ok] - start), float(errs[-1])
 
 
+def _fst_run(work: Path, seed: int) -> tuple[RunResult, float, Path]:
+    seq = work / f"fst{seed}"
+    simulate(SimConfig(motion="forward-stop-turn", seconds=8.0, width=W, height=H, seed=seed), seq, force=True)
+    res, secs = _run(seq, work / f"fst{seed}_out")
+    return res, secs, seq
+
+
 def forward_stop_turn(work: Path) -> list[Row]:
-    seq = work / "fst"
-    simulate(SimConfig(motion="forward-stop-turn", seconds=8.0, width=W, height=H), seq, force=True)
-    res, secs = _run(seq, work / "fst_out")
+    res, secs, seq = _fst_run(work, FST_SEEDS[0])
     after, final = _causal_scale_time(res, seq)
+    times = [after] + [_causal_scale_time(*_fst_run(work, s)[::2])[0] for s in FST_SEEDS[1:]]
     ev: dict[str, Any] = res.eval_summary or {}
     ya = ev.get("yaw_aligned") or {}
     note = (f"causal scale error at the end {final:.2f} %; final trajectory yaw-aligned ATE "
@@ -140,6 +176,9 @@ def forward_stop_turn(work: Path) -> list[Row]:
          "unit": "s", "note": note, "target": "<= 3 s", "pass": bool(after <= 3.0)},
         {"name": "VIO sim forward-stop-turn 8 s: frames posed", "value": 100.0 * posed / max(n, 1), "unit": "%",
          "note": note, "target": "100 %", "pass": posed == n},
+        {"name": f"VIO sim forward-stop-turn 8 s, protocol over {len(FST_SEEDS)} seeds: median time to 2 % scale",
+         "value": float(np.median(times)), "unit": "s", "target": "<= 3 s", "pass": bool(np.median(times) <= 3.0),
+         "note": f"seeds {list(FST_SEEDS)}: {[round(t, 3) for t in times]} s"},
     ]
 
 
