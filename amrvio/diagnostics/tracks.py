@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from amrvio.tracking.brightness import QUANTILES, AffineBrightness, Invariance, affine_from_quantiles
 from amrvio.tracking.detect import DetectorConfig
-from amrvio.tracking.lk import LkConfig, LkTracker, TrackImage, TrackResult
+from amrvio.tracking.lk import LkConfig, LkTracker, TrackImage, TrackResult, reduction_levels
 
 F64 = NDArray[np.float64]
 U8 = NDArray[np.uint8]
@@ -60,10 +60,8 @@ def diagnostics_tracker(config: TrackingConfig, width: int) -> LkTracker:
     windows at full resolution cost 25 % less but made the parallax flag miss standstills: ROC
     AUC 0.85 against 0.95 on the diagnostics-truth suite, 376x240); 11 px windows one level down
     (376x240) see what the truth suite's frames show."""
-    lk, down = config.lk, 0
-    if lk.max_width_px is not None:
-        while (width >> down) > lk.max_width_px:
-            down += 1
+    lk = config.lk
+    down = reduction_levels(width, lk.max_width_px)
     return LkTracker(replace(lk, pyr_levels=max(lk.pyr_levels - down, 1)))
 
 

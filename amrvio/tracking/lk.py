@@ -252,9 +252,9 @@ def _epipolar_reject(p0: F64, p1: F64, ok: NDArray[np.bool_], cfg: EpipolarConfi
 
 __all__ = [
     "EpipolarConfig",
-    "reduction_levels",
     "LkConfig",
     "LkTracker",
     "TrackImage",
     "TrackResult",
+    "reduction_levels",
 ]
