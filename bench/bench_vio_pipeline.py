@@ -90,6 +90,26 @@ FST_SEEDS = (0, 1, 2, 3)
 MH01_SEEDS = (0, 1, 2, 3)
 
 
+def _seed_rows(tag: str, seeds_name: str, seeds: tuple[int, ...], first: list[Row],
+               others: list[dict[str, Any]], ate_max: float, scale_max: float) -> list[Row]:
+    """The protocol rows of a case run over ``seeds``: the medians of the SE3 ATE and the scale
+    error, against their targets; ``first``: the headline run's :func:`_accuracy_rows` (the
+    first seed), ``others``: the evaluation summaries of the other seeds' runs."""
+    ates, scales = [float(first[1]["value"])], [float(first[2]["value"])]  # type: ignore[arg-type]
+    for ev in others:
+        ates.append(float(ev.get("ate_metric_m") or float("nan")))
+        scales.append(float(ev.get("scale_error_pct") or float("nan")))
+    note = (f"{seeds_name} {list(seeds)}: SE3 ATE {[round(a, 4) for a in ates]} m, scale error "
+            f"{[round(x, 2) for x in scales]} %")
+    name = f"{tag}, protocol over {len(seeds)} {seeds_name}: median"
+    return [
+        {"name": f"{name} SE3 ATE", "value": float(np.median(ates)), "unit": "m", "note": note,
+         "target": f"<= {ate_max} m", "pass": bool(np.median(ates) <= ate_max)},
+        {"name": f"{name} scale error", "value": float(np.median(scales)), "unit": "%", "note": note,
+         "target": f"<= {scale_max} %", "pass": bool(np.median(scales) <= scale_max)},
+    ]
+
+
 def _replay_run(work: Path, seconds: float, seed: int) -> tuple[RunResult, float]:
     seq = work / f"replay{seed}"
     simulate(SimConfig(motion="replay", scene="room", seconds=seconds, trajectory=str(
@@ -105,21 +125,8 @@ def replay(work: Path, quick: bool) -> list[Row]:
     rows = _accuracy_rows(tag, res, secs, 0.05, 1.0)
     if quick:
         return rows
-    ates, scales = [float(rows[1]["value"])], [float(rows[2]["value"])]  # type: ignore[arg-type]
-    for seed in REPLAY_SEEDS[1:]:
-        ev: dict[str, Any] = _replay_run(work, seconds, seed)[0].eval_summary or {}
-        ates.append(float(ev.get("ate_metric_m") or float("nan")))
-        scales.append(float(ev.get("scale_error_pct") or float("nan")))
-    note = (f"render seeds {list(REPLAY_SEEDS)}: SE3 ATE {[round(a, 4) for a in ates]} m, scale error "
-            f"{[round(x, 2) for x in scales]} %")
-    return rows + [
-        {"name": f"{tag}, protocol over {len(REPLAY_SEEDS)} render seeds: median SE3 ATE",
-         "value": float(np.median(ates)), "unit": "m", "note": note, "target": "<= 0.05 m",
-         "pass": bool(np.median(ates) <= 0.05)},
-        {"name": f"{tag}, protocol over {len(REPLAY_SEEDS)} render seeds: median scale error",
-         "value": float(np.median(scales)), "unit": "%", "note": note, "target": "<= 1.0 %",
-         "pass": bool(np.median(scales) <= 1.0)},
-    ]
+    others = [_replay_run(work, seconds, seed)[0].eval_summary or {} for seed in REPLAY_SEEDS[1:]]
+    return rows + _seed_rows(tag, "render seeds", REPLAY_SEEDS, rows, others, 0.05, 1.0)
 
 
 def _mh01_run(work: Path, seed: int) -> tuple[RunResult, float]:
@@ -133,20 +140,8 @@ def mh01(work: Path) -> list[Row]:
     tag = "VIO EuRoC MH_01 handheld 300 frames (IMU from GT)"
     res, secs = _mh01_run(work, MH01_SEEDS[0])
     rows = _accuracy_rows(tag, res, secs, 0.05, 2.0)
-    ates, scales = [float(rows[1]["value"])], [float(rows[2]["value"])]  # type: ignore[arg-type]
-    for seed in MH01_SEEDS[1:]:
-        ev: dict[str, Any] = _mh01_run(work, seed)[0].eval_summary or {}
-        ates.append(float(ev.get("ate_metric_m") or float("nan")))
-        scales.append(float(ev.get("scale_error_pct") or float("nan")))
-    note = (f"IMU noise seeds {list(MH01_SEEDS)}: SE3 ATE {[round(a, 4) for a in ates]} m, scale error "
-            f"{[round(x, 2) for x in scales]} %")
-    return rows + [
-        {"name": f"{tag}, protocol over {len(MH01_SEEDS)} IMU seeds: median SE3 ATE", "value": float(np.median(ates)),
-         "unit": "m", "note": note, "target": "<= 0.05 m", "pass": bool(np.median(ates) <= 0.05)},
-        {"name": f"{tag}, protocol over {len(MH01_SEEDS)} IMU seeds: median scale error",
-         "value": float(np.median(scales)), "unit": "%", "note": note, "target": "<= 2.0 %",
-         "pass": bool(np.median(scales) <= 2.0)},
-    ]
+    others = [_mh01_run(work, seed)[0].eval_summary or {} for seed in MH01_SEEDS[1:]]
+    return rows + _seed_rows(tag, "IMU seeds", MH01_SEEDS, rows, others, 0.05, 2.0)
 
 
 def _causal_scale_time(res: RunResult, data: Path) -> tuple[float, float]:
