@@ -45,6 +45,7 @@ def triangulate_pending(tracks: LandmarkTracks, obs: VisualObservations, k: int,
     time (its first keyframe's) into ``stamps``, and its observation at ``k`` into ``used``. A
     track with the parallax that lands behind a camera, out of the depth range or further than
     ``gate_px`` from one of its pixels is dropped (an outlier in it, or a point at infinity).
+    A triangulated landmark also gets the weak prior of ``vis.landmark_prior_range``.
     """
     import gtsam
 
@@ -84,6 +85,10 @@ def triangulate_pending(tracks: LandmarkTracks, obs: VisualObservations, k: int,
             continue
         if seeded[t]:
             graph.add(gtsam.PriorFactorPoint3(sym("l", tracks.next_key), X[t], seed_noise))
+        elif vis.landmark_prior_range > 0:
+            rng = float(np.linalg.norm(X[t] - c[np.flatnonzero(track == t)[0]]))  # from its first camera
+            weak = gtsam.noiseModel.Isotropic.Sigma(3, vis.landmark_prior_range * rng)
+            graph.add(gtsam.PriorFactorPoint3(sym("l", tracks.next_key), X[t], weak))
         track_obs = tracks.pending[lm_id]
         first = track_obs[0][0]
         key = tracks.activate(lm_id, first)
@@ -96,4 +101,17 @@ def triangulate_pending(tracks: LandmarkTracks, obs: VisualObservations, k: int,
     return n_new
 
 
-__all__ = ["keyframe_parallax_deg", "triangulate_pending"]
+def landmark_prior_share(prior_range: float, parallax_deg: float, pixel_sigma_px: float, focal_px: float) -> float:
+    """The share of a landmark's depth information that its weak prior holds: a prior of
+    ``prior_range`` ranges against two views whose rays meet at ``parallax_deg``, each with
+    ``pixel_sigma_px`` of noise at focal length ``focal_px``. First order, the depth sigma of
+    that pair is range * (pixel_sigma / focal) * sqrt(2) / parallax; the share is
+    info_prior / (info_prior + info_views)."""
+    if prior_range <= 0:
+        return 0.0
+    depth_rel = (pixel_sigma_px / focal_px) * np.sqrt(2.0) / np.radians(parallax_deg)
+    info_views, info_prior = 1.0 / depth_rel**2, 1.0 / prior_range**2
+    return float(info_prior / (info_prior + info_views))
+
+
+__all__ = ["keyframe_parallax_deg", "landmark_prior_share", "triangulate_pending"]

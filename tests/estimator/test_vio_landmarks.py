@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from amrvio.errors import ConfigError
 from amrvio.estimator.vio_landmarks import LandmarkTracks, project_px, triangulate_tracks
-from amrvio.estimator.vio_triangulate import keyframe_parallax_deg
+from amrvio.estimator.vio_triangulate import keyframe_parallax_deg, landmark_prior_share, triangulate_pending
+from amrvio.estimator.vio_types import VisualConfig
 from amrvio.types.lie import SE3, SO3
 
 K = np.array([[450.0, 0.0, 320.0], [0.0, 450.0, 240.0], [0.0, 0.0, 1.0]])
@@ -73,3 +75,80 @@ def test_tracks_forget_what_left_the_window() -> None:
     tr.forget_before(5)
     assert 2 not in tr.pending  # only seen by keyframe 4
     assert 1 not in tr.active and 7 in tr.active  # landmark 1 left with its first keyframe (3)
+
+
+def test_weak_prior_share_is_the_depth_information_of_two_views() -> None:
+    """The closed form of landmark_prior_share against the marginal depth variance of the
+    3-D point computed from the numeric Jacobians of two pinhole projections."""
+    f, sigma_px, parallax = 450.0, 1.0, 1.0
+    z = 5.0
+    b = 2 * z * np.tan(np.radians(parallax) / 2)  # two cameras whose rays meet at `parallax`
+    X = np.array([0.0, 0.0, z])
+    info = np.zeros((3, 3))
+    for cx in (-b / 2, b / 2):
+        T_wc = SE3(SO3.exp([0.0, 0.0, 0.0]), np.array([cx, 0.0, 0.0]))
+        Kf = np.array([[f, 0.0, 320.0], [0.0, f, 240.0], [0.0, 0.0, 1.0]])
+        J = np.zeros((2, 3))
+        for i in range(3):
+            d = np.zeros(3)
+            d[i] = 1e-6
+            J[:, i] = (project_px(Kf, T_wc, (X + d)[None])[0][0] - project_px(Kf, T_wc, (X - d)[None])[0][0]) / 2e-6
+        info += J.T @ J / sigma_px**2
+    u = (X - np.array([-b / 2, 0.0, 0.0])) / np.linalg.norm(X - np.array([-b / 2, 0.0, 0.0]))
+    var_depth = u @ np.linalg.inv(info) @ u  # marginal, along the first camera's ray
+    rng = float(np.linalg.norm(X - np.array([-b / 2, 0.0, 0.0])))
+    for factor in (1.0, 3.0, 10.0):
+        info_prior = 1.0 / (factor * rng) ** 2
+        share = info_prior / (info_prior + 1.0 / var_depth)
+        assert landmark_prior_share(factor, parallax, sigma_px, f) == pytest.approx(share, rel=0.02)
+    assert landmark_prior_share(0.0, parallax, sigma_px, f) == 0.0
+    # the default holds ~1 % of the depth information at the smallest parallax for a 376 px wide
+    # image (f 229 px) and less for larger images
+    assert landmark_prior_share(VisualConfig().landmark_prior_range, VisualConfig().min_parallax_deg, 1.0,
+                                229.36) < 0.015
+
+
+def _two_view_graph(prior_range: float, shift: np.ndarray) -> float:
+    """The error of the graph triangulate_pending builds for one track seen by two keyframes,
+    at values where the new landmark is moved by ``shift`` from its triangulation."""
+    import gtsam
+
+    from amrvio.estimator.vio_graph import make_camera, state_keys, sym
+    from amrvio.estimator.vio_types import VisualObservations
+    from amrvio.imu.propagation import to_gtsam_pose
+
+    vis = VisualConfig(landmark_prior_range=prior_range)
+    cam = make_camera(K, SE3.identity(), vis)
+    X = np.array([0.3, -0.2, 4.0])
+    cams = {0: SE3.identity(), 1: SE3(SO3.exp([0.0, 0.02, 0.0]), np.array([0.2, 0.0, 0.0]))}
+    tracks = LandmarkTracks()
+    uv = {k: project_px(K, T, X[None])[0][0] for k, T in cams.items()}
+    tracks.observe_pending(5, 0, uv[0])
+    tracks.observe_pending(5, 1, uv[1])
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    stamps: dict[int, float] = {}
+    used: list[tuple[int, np.ndarray]] = []
+    obs = VisualObservations(np.array([5]), uv[1][None])
+    n = triangulate_pending(tracks, obs, 1, cams, {0: 0, 1: 1}, cam, vis, graph, values, stamps, used, 0.05)
+    assert n == 1 and 5 in tracks.active
+    np.testing.assert_allclose(values.atPoint3(sym("l", 0)), X, atol=1e-6)
+    for k, T in cams.items():
+        values.insert(state_keys(k)[0], to_gtsam_pose(T))
+    moved = gtsam.Values(values)
+    moved.update(sym("l", 0), X + shift)
+    return float(graph.error(moved))
+
+
+def test_a_triangulated_landmark_gets_the_weak_prior_of_its_range() -> None:
+    shift = np.array([0.0, 0.0, 0.5])
+    with_prior, without = _two_view_graph(3.0, shift), _two_view_graph(0.0, shift)
+    sigma = 3.0 * np.linalg.norm([0.3, -0.2, 4.0])  # 3 ranges from the first camera (at the origin)
+    assert with_prior - without == pytest.approx(0.5 * 0.25 / sigma**2, rel=1e-6)
+    assert _two_view_graph(3.0, np.zeros(3)) == pytest.approx(0.0, abs=1e-9)  # it sits at the triangulation
+
+
+def test_landmark_prior_range_must_be_a_non_negative_number() -> None:
+    with pytest.raises(ConfigError, match="landmark_prior_range"):
+        VisualConfig(landmark_prior_range=-1.0)
+    with pytest.raises(ConfigError, match="landmark_prior_range"):
+        VisualConfig(landmark_prior_range=float("nan"))
