@@ -122,7 +122,7 @@ def _observations_swapped(fix: ObsFix | None) -> Iterator[None]:
             observations = fix(state.state.t_ns, observations)
         return init(self, state, imu, observations)
 
-    cls.add_frame, cls.initialise = add_frame, initialise  # type: ignore[method-assign]
+    cls.add_frame, cls.initialise = add_frame, initialise  # type: ignore[method-assign, assignment]
     try:
         yield
     finally:
