@@ -50,6 +50,15 @@ F64 = NDArray[np.float64]
 ObsFix = Callable[[int, VisualObservations], VisualObservations]
 
 
+def _bilinear(img: NDArray[np.float32], u: float, v: float) -> float:
+    """``img`` at pixel (u, v) (pixel centres at integers), bilinear; the depth at the rounded
+    pixel alone puts a point on a floor seen at a grazing angle visibly off its true position."""
+    u0, v0 = min(max(int(np.floor(u)), 0), img.shape[1] - 2), min(max(int(np.floor(v)), 0), img.shape[0] - 2)
+    a, b = u - u0, v - v0
+    q = img[v0:v0 + 2, u0:u0 + 2].astype(np.float64)
+    return float((1 - b) * ((1 - a) * q[0, 0] + a * q[0, 1]) + b * ((1 - a) * q[1, 0] + a * q[1, 1]))
+
+
 def _truth_fix(seq: Path, noise_px: float, reject_px: float | None) -> ObsFix:
     """The observation swap: true projections + ``noise_px`` noise, or (``reject_px``) the
     observations themselves less those further than ``reject_px`` from their true projection."""
@@ -79,7 +88,7 @@ def _truth_fix(seq: Path, noise_px: float, reject_px: float | None) -> ObsFix:
                         or patch.max() - patch.min() > 0.05 * patch.min():
                     first[int(obs.ids[k])] = None
                     continue
-                Xc = float(depth[iv, iu]) * np.linalg.solve(K, [u, v, 1.0])
+                Xc = _bilinear(depth, u, v) * np.linalg.solve(K, [u, v, 1.0])
                 first[int(obs.ids[k])] = (T_wc @ np.r_[Xc, 1.0])[:3]
         keep_ids, keep_uv = [], []
         for k, i in enumerate(obs.ids.tolist()):
