@@ -41,6 +41,7 @@ from amrvio.estimator.vio_graph import (
     make_camera,
     make_smoother,
     marginal_covariance,
+    pixel_noise,
     prior_sigmas_15,
     smoother_update,
     state_keys,
@@ -93,6 +94,7 @@ class VioBackend:
         self._smoother: gtsam.IncrementalFixedLagSmoother | None = None
         self._values: gtsam.Values | None = None
         self._tracks = LandmarkTracks()
+        self._noise_by_age: dict[int, gtsam.noiseModel.Base] = {}
         self._window: list[WindowFrame] = []
         self._last: tuple[InertialState, F64] | None = None  # newest frame's state and 15x15 covariance
         self._history: deque[KeyframeCheckInput] = deque(maxlen=HISTORY)
@@ -202,9 +204,10 @@ class VioBackend:
             removed = prev.slots
         positions = []
         used: list[tuple[int, F64]] = []
+        born = {lm.key: lm.first_keyframe for lm in self._tracks.active.values()}
         for key, uv in seen:
             positions.append(graph.size())
-            graph.add(self._cam.factor(uv, k, key))
+            graph.add(self._cam.factor(uv, k, key, self._age_noise(k - born.get(key, k))))
             used.append((key, uv))
         n_new = 0
         if is_kf:
@@ -340,6 +343,17 @@ class VioBackend:
         Xw = np.array([self._landmark(key) for key, _ in seen])
         parallax = keyframe_parallax_deg(Xw, self._kf_camera(last_kf.index).t, T_wc_pred.t)
         return parallax >= vis.keyframe_parallax_deg
+
+    def _age_noise(self, age: int) -> gtsam.noiseModel.Base | None:
+        """The pixel noise of an observation of a landmark first seen ``age`` frames ago (None:
+        the camera's own; see ``VisualConfig.track_age_sigma_frames``)."""
+        vis = self.cfg.visual
+        if vis.track_age_sigma_frames <= 0 or age <= 0:
+            return None
+        if age not in self._noise_by_age:
+            sigma = vis.pixel_sigma_px * float(np.sqrt(1.0 + age / vis.track_age_sigma_frames))
+            self._noise_by_age[age] = pixel_noise(vis, sigma)
+        return self._noise_by_age[age]
 
     def _rms_px(self, state: InertialState, used: list[tuple[int, F64]]) -> float | None:
         """RMS pixel distance of this frame's used observations to their optimised projection."""

@@ -52,12 +52,24 @@ class Camera:
     body_P_cam: gtsam.Pose3
     noise: gtsam.noiseModel.Base
 
-    def factor(self, uv: F64, frame: int, landmark: int) -> gtsam.GenericProjectionFactorCal3_S2:
-        """Projection factor of landmark ``landmark`` seen at ``uv`` from frame ``frame``."""
+    def factor(self, uv: F64, frame: int, landmark: int,
+               noise: gtsam.noiseModel.Base | None = None) -> gtsam.GenericProjectionFactorCal3_S2:
+        """Projection factor of landmark ``landmark`` seen at ``uv`` from frame ``frame`` (with
+        ``noise``, else the camera's own)."""
         import gtsam
 
-        return gtsam.GenericProjectionFactorCal3_S2(np.asarray(uv), self.noise, sym("x", frame), sym("l", landmark),
-                                                    self.cal, False, False, self.body_P_cam)
+        return gtsam.GenericProjectionFactorCal3_S2(np.asarray(uv), self.noise if noise is None else noise,
+                                                    sym("x", frame), sym("l", landmark), self.cal, False, False,
+                                                    self.body_P_cam)
+
+
+def pixel_noise(cfg: VisualConfig, sigma_px: float) -> gtsam.noiseModel.Base:
+    """Isotropic pixel noise of ``sigma_px`` with the Huber loss of ``cfg`` (its corner at
+    ``huber_px / pixel_sigma_px`` standard deviations)."""
+    import gtsam
+
+    return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(cfg.huber_px / cfg.pixel_sigma_px),
+                                          gtsam.noiseModel.Isotropic.Sigma(2, float(sigma_px)))
 
 
 def make_camera(K: ArrayLike, T_body_cam: SE3, cfg: VisualConfig) -> Camera:
@@ -67,9 +79,7 @@ def make_camera(K: ArrayLike, T_body_cam: SE3, cfg: VisualConfig) -> Camera:
     if Km.shape != (3, 3) or not np.all(np.isfinite(Km)) or Km[0, 0] <= 0 or Km[1, 1] <= 0:
         raise ShapeError(f"K must be a finite (3, 3) camera matrix with positive focal lengths, got {Km.tolist()}")
     cal = gtsam.Cal3_S2(Km[0, 0], Km[1, 1], Km[0, 1], Km[0, 2], Km[1, 2])
-    noise = gtsam.noiseModel.Robust.Create(
-        gtsam.noiseModel.mEstimator.Huber.Create(cfg.huber_px / cfg.pixel_sigma_px),
-        gtsam.noiseModel.Isotropic.Sigma(2, cfg.pixel_sigma_px))
+    noise = pixel_noise(cfg, cfg.pixel_sigma_px)
     K_inv = np.asarray(np.linalg.inv(Km), dtype=np.float64)
     return Camera(Km, K_inv, T_body_cam, cal, to_gtsam_pose(T_body_cam), noise)
 
