@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 from amrvio.app.run import RunResult
 from amrvio.app.run import run as run_recording
 from amrvio.estimator import vio_backend
+from amrvio.estimator.vio_landmarks import project_px
 from amrvio.estimator.vio_types import VisualObservations
 from amrvio.io.dataset import open_dataset
 from amrvio.pipeline.threads import limit_native_threads
@@ -76,10 +77,10 @@ def _truth_fix(seq: Path, noise_px: float, reject_px: float | None) -> ObsFix:
 
     def fix(t_ns: int, obs: VisualObservations) -> VisualObservations:
         T_wc = gt.interpolated_at([t_ns * 1e-9]).matrices()[0] @ T_body_cam
-        T_cw = np.linalg.inv(T_wc)
+        T_wc_se3 = SE3.from_matrix(T_wc)
         new = [k for k, i in enumerate(obs.ids.tolist()) if i not in first]
         if new:
-            depth = renderer.depth(SE3.from_matrix(T_wc))
+            depth = renderer.depth(T_wc_se3)
             for k in new:
                 u, v = obs.uv_px[k]
                 iu, iv = int(round(u)), int(round(v))
@@ -95,11 +96,10 @@ def _truth_fix(seq: Path, noise_px: float, reject_px: float | None) -> ObsFix:
             X = first.get(i)
             if X is None:
                 continue
-            Xc = (T_cw @ np.r_[X, 1.0])[:3]
-            if Xc[2] <= 0.05:
+            uv_true, z = project_px(K, T_wc_se3, X[None])
+            if z[0] <= 0.05:
                 continue
-            p = K @ Xc
-            true_uv = p[:2] / p[2]
+            true_uv = uv_true[0]
             if reject_px is not None:
                 if np.linalg.norm(obs.uv_px[k] - true_uv) <= reject_px:
                     keep_ids.append(i)
