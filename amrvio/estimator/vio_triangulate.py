@@ -76,6 +76,7 @@ def triangulate_pending(tracks: LandmarkTracks, obs: VisualObservations, k: int,
     np.logical_or.at(track_bad, track, bad)
     ready = seeded | (tri.ok & (tri.parallax_deg >= vis.min_parallax_deg))
     seed_noise = gtsam.noiseModel.Isotropic.Sigma(3, seed_sigma_m)
+    first_obs = np.searchsorted(track, np.arange(len(ids)))  # each track's first row (rows are grouped)
     n_new = 0
     for t in np.flatnonzero(ready).tolist():
         lm_id = ids[t]
@@ -86,7 +87,7 @@ def triangulate_pending(tracks: LandmarkTracks, obs: VisualObservations, k: int,
         if seeded[t]:
             graph.add(gtsam.PriorFactorPoint3(sym("l", tracks.next_key), X[t], seed_noise))
         elif vis.landmark_prior_range > 0:
-            rng = float(np.linalg.norm(X[t] - c[np.flatnonzero(track == t)[0]]))  # from its first camera
+            rng = float(np.linalg.norm(X[t] - c[first_obs[t]]))  # from its first camera
             weak = gtsam.noiseModel.Isotropic.Sigma(3, vis.landmark_prior_range * rng)
             graph.add(gtsam.PriorFactorPoint3(sym("l", tracks.next_key), X[t], weak))
         track_obs = tracks.pending[lm_id]
