@@ -84,6 +84,32 @@ def test_health_csv_has_the_vio_columns(vio_run: RunResult) -> None:
     assert '"type":"static_init"' in events
 
 
+def test_zero_velocity_is_flagged_only_where_the_robot_stands(vio_run: RunResult, sim_dir: Path) -> None:
+    """Against the simulator's ground truth: every frame whose update had v = 0 in it stands
+    (true speed under 1 cm/s), and the stop that ends the drive (at about 4 s) is flagged."""
+    assert vio_run.out_dir is not None
+    with (vio_run.out_dir / "health.csv").open(encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    gt = open_dataset(str(sim_dir)).groundtruth
+    assert gt is not None
+    t = np.array([r.t_ns for r in vio_run.records], dtype=np.float64) * 1e-9
+    speed = np.linalg.norm(gt.interpolated_at(t + 0.005).positions_m - gt.interpolated_at(t - 0.005).positions_m,
+                           axis=1) / 0.01
+    flagged = np.array([r["vio_zero_velocity"] == "1" for r in rows])
+    judged = np.array([r["vio_zero_velocity"] != "" for r in rows])
+    assert np.all(speed[flagged] < 0.01), speed[flagged]
+    assert np.count_nonzero(flagged & (t - gt.stamps_s[0] > 4.0)) >= 2
+    # while it drives (over 5 cm/s), no frame is flagged, and every one was judged
+    driving = speed > 0.05
+    assert driving.sum() > 20 and not np.any(flagged & driving) and np.all(judged[driving])
+    vio = [r.estimator.vio for r in vio_run.records]
+    assert all(v.estimate is not None and v.estimate.state is not None
+               and np.linalg.norm(v.estimate.state.v_world_m_s) < 0.01
+               for v, f in zip(vio, flagged, strict=True) if f and v is not None)
+    events = (vio_run.out_dir / "events.jsonl").read_text(encoding="utf-8")
+    assert '"type":"vio_zero_velocity","frame":' in events and '"value":"start:flow_px=' in events
+
+
 def test_no_imu_gives_the_vo_path(sim_dir: Path, tmp_path: Path) -> None:
     cfg = PipelineConfig()
     cfg = dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, enabled=False))

@@ -20,6 +20,7 @@ from amrvio.frontend.tracker import TrackOutcome
 from amrvio.frontend.tracks import TrackSet
 from amrvio.imu.propagation import InertialState
 from amrvio.imu.static_init import StaticInitResult
+from amrvio.pipeline.zero_velocity import ZeroVelocity, ZeroVelocityConfig
 from amrvio.types.lie import SE3
 from amrvio.types.sensors import ImuData, ImuNoise, WheelData
 
@@ -28,36 +29,56 @@ I64 = NDArray[np.int64]
 
 
 @dataclass(frozen=True, slots=True)
+class DynamicInitConfig:
+    """The VIO stage's dynamic initialisation: ``min_keyframes`` / ``max_window_s``: the VO
+    keyframes it needs, and the longest span it uses; ``max_scale_rel_std`` /
+    ``max_gravity_std_deg``: the scale std / scale and gravity-direction std it accepts (looser
+    than the initialiser's own gates for a lone window: the smoother refines both afterwards)."""
+
+    min_keyframes: int = 8
+    max_window_s: float = 10.0
+    max_scale_rel_std: float = 0.015
+    max_gravity_std_deg: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not 3 <= self.min_keyframes <= 1000:
+            raise ConfigError(f"vio.dynamic_init.min_keyframes must be in [3, 1000], got {self.min_keyframes}")
+        if not (np.isfinite(self.max_window_s) and self.max_window_s >= 1.0):
+            raise ConfigError(f"vio.dynamic_init.max_window_s must be >= 1 s, got {self.max_window_s}")
+        if not 0 < self.max_scale_rel_std < 1:
+            raise ConfigError(f"vio.dynamic_init.max_scale_rel_std must be in (0, 1), got {self.max_scale_rel_std}")
+        if not 0 < self.max_gravity_std_deg < 90:
+            raise ConfigError(f"vio.dynamic_init.max_gravity_std_deg must be in (0, 90), "
+                              f"got {self.max_gravity_std_deg}")
+
+
+@dataclass(frozen=True, slots=True)
 class VioStageConfig:
     """``enabled``: run VIO when the recording has an IMU; ``imu_noise_scale``: factor on the
     IMU's noise densities and random walks (a vibrating platform is noisier than its datasheet);
     ``window_keyframes``: keyframes in the fixed-lag smoother; ``static_init_s``: still this long
-    from the start starts the smoother at rest (0: never); ``min_init_keyframes`` /
-    ``max_init_window_s``: the VO keyframes the dynamic initialisation needs, and the longest span
-    it uses; ``min_tracks``: fewer tracks than this and a frame is bridged by the IMU;
-    ``reinit_on_check_failure``: re-initialise when a consistency check fails;
-    ``max_init_scale_rel_std`` / ``max_init_gravity_std_deg``: the dynamic initialisation's scale
-    std / scale and gravity-direction std it accepts (looser than the initialiser's own gates for
-    a lone window: the smoother refines both afterwards); ``wheel_sigma_m_s``: standard deviation
+    from the start starts the smoother at rest (0: never); ``dynamic_init``: the dynamic
+    initialisation's needs and gates (:class:`DynamicInitConfig`); ``min_tracks``: fewer tracks
+    than this and a frame is bridged by the IMU; ``reinit_on_check_failure``: re-initialise when
+    a consistency check fails; ``wheel_sigma_m_s``: standard deviation
     of the wheel-odometry velocity (forward speed, and the zero sideways and vertical speed of a
     ground robot) when the recording has wheel odometry (0, the default: not used; a wheel file
     does not say the platform is a ground robot; ``amrvio run --wheels`` sets 0.05);
     ``max_smear_px``: a frame whose predicted smear (the gyro's rotation plus the translation,
     :mod:`amrvio.pipeline.smear_motion`) is larger is bridged by the IMU (its tracks are not
-    trusted), whatever the blur gate said."""
+    trusted), whatever the blur gate said; ``zero_velocity``: the zero-velocity update at
+    standstill (:mod:`amrvio.pipeline.zero_velocity`)."""
 
     enabled: bool = True
     imu_noise_scale: float = 1.0
     window_keyframes: int = 10
     static_init_s: float = 0.4
-    min_init_keyframes: int = 8
-    max_init_window_s: float = 10.0
+    dynamic_init: DynamicInitConfig = field(default_factory=DynamicInitConfig)
     min_tracks: int = 10
     reinit_on_check_failure: bool = True
-    max_init_scale_rel_std: float = 0.015
-    max_init_gravity_std_deg: float = 1.0
     wheel_sigma_m_s: float = 0.0
     max_smear_px: float = 8.0
+    zero_velocity: ZeroVelocityConfig = field(default_factory=ZeroVelocityConfig)
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.imu_noise_scale) and self.imu_noise_scale > 0):
@@ -66,14 +87,6 @@ class VioStageConfig:
             raise ConfigError(f"vio.window_keyframes must be in [2, 200], got {self.window_keyframes}")
         if not (np.isfinite(self.static_init_s) and self.static_init_s >= 0):
             raise ConfigError(f"vio.static_init_s must be >= 0, got {self.static_init_s}")
-        if not 3 <= self.min_init_keyframes <= 1000:
-            raise ConfigError(f"vio.min_init_keyframes must be in [3, 1000], got {self.min_init_keyframes}")
-        if not (np.isfinite(self.max_init_window_s) and self.max_init_window_s >= 1.0):
-            raise ConfigError(f"vio.max_init_window_s must be >= 1 s, got {self.max_init_window_s}")
-        if not 0 < self.max_init_scale_rel_std < 1:
-            raise ConfigError(f"vio.max_init_scale_rel_std must be in (0, 1), got {self.max_init_scale_rel_std}")
-        if not 0 < self.max_init_gravity_std_deg < 90:
-            raise ConfigError(f"vio.max_init_gravity_std_deg must be in (0, 90), got {self.max_init_gravity_std_deg}")
         if not (np.isfinite(self.wheel_sigma_m_s) and self.wheel_sigma_m_s >= 0):
             raise ConfigError(f"vio.wheel_sigma_m_s must be >= 0, got {self.wheel_sigma_m_s}")
         if not self.max_smear_px > 0:
@@ -124,17 +137,37 @@ class ImuSetup:
 
 
 
+@dataclass(frozen=True, slots=True)
+class VoAnchor:
+    """How a VO segment's frame maps into the VIO world: ``p_world = scale R_world_vo p_vo``."""
+
+    segment: int
+    scale: float
+    R_world_vo: F64
+
+
+@dataclass
+class StaticStart:
+    """The VIO stage's static start: the first frame's tracks, the decision and its result."""
+
+    ids: I64 | None = None
+    uv: F64 | None = None
+    decided: bool = False
+    result: StaticInitResult | None = None
+
+
 @dataclass
 class BodyTrack:
     """Per frame index: the body pose ``T_world_body`` (4x4) the stage gives it, and frame times;
-    whether the newest smoothed pose passed its consistency checks, and how many updates in a row
-    the solver failed."""
+    whether the newest smoothed pose passed its consistency checks, how many updates in a row
+    the solver failed, and how the running estimate was initialised (``VioReport.init_kind``)."""
 
     poses: dict[int, F64] = field(default_factory=dict)
     index_of: dict[int, int] = field(default_factory=dict)
     bridged: set[int] = field(default_factory=set)
     consistent: bool = False  # the newest smoothed pose passed the consistency checks
     solver_failures: int = 0  # consecutive updates the solver failed
+    init_kind: str = ""
 
     def set(self, index: int, t_ns: int, T_world_body: SE3, bridged: bool = False) -> None:
         self.index_of[t_ns] = index
@@ -170,7 +203,9 @@ class VioReport:
     dynamic initialisation attempted at this frame (None when none was); ``static``: the static
     initialisation decided at this frame; ``last_init``: the latest dynamic attempt (carried from
     frame to frame, for the health record); ``checks``: the consistency checks of the update;
-    ``init_kind``: how the running estimate was initialised ("static", "dynamic", "reinit" or "")."""
+    ``init_kind``: how the running estimate was initialised ("static", "dynamic", "reinit" or "");
+    ``zero_velocity``: the standstill verdict on the frame (None: not judged, the smoother was
+    not running or the frame was bridged); when ``still``, the update had ``v = 0`` in it."""
 
     phase: VioPhase
     estimate: VioEstimate | None = None
@@ -180,6 +215,7 @@ class VioReport:
     last_init: ViInitResult | None = None
     checks: ConsistencyReport | None = None
     init_kind: str = ""
+    zero_velocity: ZeroVelocity | None = None
 
     @property
     def bridged(self) -> bool:
@@ -205,6 +241,10 @@ class VioReport:
                 out["vio_velocity_sigma_m_s"] = _num(float(np.linalg.norm(est.velocity_sigma_m_s)), ".5f")
         if self.checks is not None:
             out["vio_checks"] = self.checks.summary()
+        zv = self.zero_velocity
+        if zv is not None and zv.judged:
+            out["vio_zero_velocity"] = "1" if zv.still else "0"
+            out["vio_zero_velocity_flow_px"] = _num(zv.flow_px, ".3f")
         if self.static is not None:
             out["vio_static_init"] = self.static.status.value
         init = self.last_init
@@ -220,17 +260,20 @@ class VioReport:
 
 VIO_COLUMNS = ["vio_phase", "vio_init_kind", "vio_vx_m_s", "vio_vy_m_s", "vio_vz_m_s", "vio_speed_m_s",
                "vio_gyro_bias_norm_rad_s", "vio_accel_bias_norm_m_s2", "vio_position_sigma_m",
-               "vio_velocity_sigma_m_s", "vio_checks", "vio_static_init", "vi_init_status", "vi_init_scale",
+               "vio_velocity_sigma_m_s", "vio_checks", "vio_zero_velocity", "vio_zero_velocity_flow_px",
+               "vio_static_init", "vi_init_status", "vi_init_scale",
                "vi_init_scale_std", "vi_init_gravity_norm_residual_m_s2", "vi_init_gravity_std_deg"]
 """The visual-inertial columns of health.csv: phase, how it was initialised, velocity (world, m/s),
 bias norms, position and velocity sigmas (norm of the per-axis values), the consistency checks,
-the static initialisation's verdict, and the latest dynamic initialisation's status, scale, scale
-std, gravity-norm residual and gravity-direction std."""
+the zero-velocity verdict (1: the update had v = 0 in it; 0: judged moving; empty: not judged)
+and the median track flow it judged on, the static initialisation's verdict, and the latest
+dynamic initialisation's status, scale, scale std, gravity-norm residual and gravity-direction
+std."""
 
 
 def _num(v: float, fmt: str) -> str:
     return format(v, fmt) if math.isfinite(v) else ""
 
 
-__all__ = ["UNTRACKED", "VIO_COLUMNS", "BodyTrack", "ImuSetup", "VioFrameInput", "VioPhase", "VioReport",
-           "VioStageConfig", "vio_input"]
+__all__ = ["UNTRACKED", "VIO_COLUMNS", "BodyTrack", "DynamicInitConfig", "ImuSetup", "StaticStart",
+           "VioFrameInput", "VioPhase", "VioReport", "VioStageConfig", "VoAnchor", "vio_input"]

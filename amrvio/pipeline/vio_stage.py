@@ -12,7 +12,9 @@ KLT tracks (ids and undistorted pixels) and the VO keyframe the frame became, if
    report goes into the record; once it is OK the smoother starts at the newest keyframe, in the
    gravity-aligned metric world, with the map's points it sees as landmarks;
 3. then every frame's tracks go to :meth:`VioBackend.add_frame`; a frame that is blurred, dropped,
-   repeated or lost gets an IMU prediction (``propagate(..., bridged=True)``);
+   repeated or lost gets an IMU prediction (``propagate(..., bridged=True)``); a frame at
+   standstill (the tracks and the IMU both say so, :mod:`amrvio.pipeline.zero_velocity`) adds
+   ``v = 0`` to its update, which stops the velocity drifting while the platform stands;
 4. a failed consistency check re-initialises the smoother at its own IMU prediction (logged as a
    ``vio_reinit`` event), and so does a solver failure (with the old landmarks, then without);
    an IMU gap, or ``MAX_SOLVER_FAILURES`` solver failures in a row, go back to step 2.
@@ -54,12 +56,15 @@ from amrvio.pipeline.records import BodyTrajectory, PoseStatus
 from amrvio.pipeline.vio_report import (
     BodyTrack,
     ImuSetup,
+    StaticStart,
     VioFrameInput,
     VioPhase,
     VioReport,
     VioStageConfig,
+    VoAnchor,
     vio_input,
 )
+from amrvio.pipeline.zero_velocity import ZeroVelocity, ZeroVelocityDetector
 from amrvio.types.lie import SE3, SO3, Sim3
 from amrvio.types.sensors import ImuData
 
@@ -76,29 +81,10 @@ class SensorStages:
     vio: VioStage | None = None
 
 
-@dataclass(frozen=True, slots=True)
-class VoAnchor:
-    """How a VO segment's frame maps into the VIO world: ``p_world = scale R_world_vo p_vo``."""
-
-    segment: int
-    scale: float
-    R_world_vo: F64
-
-
 STILL_PX = 0.5
 """Median track motion (px) since the first frame below which the camera stands still."""
 MAX_SOLVER_FAILURES = 3
 """Consecutive solver failures after which the smoother waits for a new initialisation."""
-
-
-@dataclass
-class _StaticStart:
-    """The static start: the first frame's tracks, the decision and its result."""
-
-    ids: I64 | None = None
-    uv: F64 | None = None
-    decided: bool = False
-    result: StaticInitResult | None = None
 
 
 class VioStage:
@@ -112,18 +98,18 @@ class VioStage:
         self.setup = setup
         base = init_config or ViInitConfig()
         self.init_cfg = dataclasses.replace(base, gates=dataclasses.replace(
-            base.gates, max_scale_rel_std=config.max_init_scale_rel_std,
-            max_gravity_std_deg=config.max_init_gravity_std_deg))
+            base.gates, max_scale_rel_std=config.dynamic_init.max_scale_rel_std,
+            max_gravity_std_deg=config.dynamic_init.max_gravity_std_deg))
         self.backend = VioBackend(VioConfig(imu=setup.noise, imu_noise_scale=config.imu_noise_scale,
                                             window_keyframes=config.window_keyframes), K, setup.T_body_cam)
         self.mapping = mapping
-        self.imu = ImuLog(config.max_init_window_s + 3.0)
+        self.imu = ImuLog(config.dynamic_init.max_window_s + 3.0)
         self.vo_keyframes: list[tuple[int, int, int]] = []  # (t_ns, segment, kf id) of one segment
-        self.start = _StaticStart()
+        self.start = StaticStart()
         self.last_init: ViInitResult | None = None
         self.anchor: VoAnchor | None = None
         self.track = BodyTrack()
-        self.kind = ""
+        self.still = ZeroVelocityDetector(config.zero_velocity)
 
     @property
     def running(self) -> bool:
@@ -153,24 +139,27 @@ class VioStage:
         """The frame's report; its body pose goes into :attr:`track`; events are appended."""
         imu = self.frame_imu(inp.t_ns, inp.imu)
         obs = VisualObservations(inp.ids, inp.uv) if inp.usable else VisualObservations.empty()
+        zv = self._zero_velocity(inp, events)
         if not self.running:
             return self._before(index, inp, obs, events)
         if not inp.usable or len(obs) < self.cfg.min_tracks or inp.smear_px > self.cfg.max_smear_px:
             est = self.backend.propagate(inp.t_ns, imu, bridged=True)
             if not est.ok or est.state is None:
-                return VioReport(VioPhase.NO_IMU, est, last_init=self.last_init, init_kind=self.kind)
+                return VioReport(VioPhase.NO_IMU, est, last_init=self.last_init, init_kind=self.track.init_kind)
             self.track.set(index, inp.t_ns, est.state.T_world_body, bridged=True)
             events.append("vio_bridged")
-            return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
+            return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.track.init_kind)
         landmarks = self.backend.landmarks()
-        res = self.backend.add_frame(inp.t_ns, imu, obs, self._wheel_velocity(inp.t_ns))
+        sigma_zv = self.cfg.zero_velocity.sigma_m_s
+        body_v = (np.zeros(3), sigma_zv) if zv.still and sigma_zv > 0 else self._wheel_velocity(inp.t_ns)
+        res = self.backend.add_frame(inp.t_ns, imu, obs, body_v)
         est = res.estimate
         if not est.ok or est.state is None:
             pred = res.predicted
             if pred is None:  # the IMU does not cover the frame: back to the VO until a new init
                 events.append(f"vio_failed:{est.status.value}")
                 self.vo_keyframes.clear()
-                return VioReport(VioPhase.NO_IMU, est, last_init=self.last_init, init_kind=self.kind)
+                return VioReport(VioPhase.NO_IMU, est, last_init=self.last_init, init_kind=self.track.init_kind)
             # the solver failed: restart at the IMU prediction with the landmarks it had; after a
             # second failure in a row without them (they may be what the solver cannot take); a
             # third gives the smoother up until the VO initialises it again (no endless loop)
@@ -181,11 +170,11 @@ class VioStage:
                 events.append(f"vio_failed:{est.status.value}")
                 self.track.solver_failures = 0
                 self.vo_keyframes.clear()
-                return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
+                return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.track.init_kind)
             events.append(f"vio_reinit:{est.status.value}")
             none = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
             self._reinit(pred, obs, imu, landmarks if self.track.solver_failures == 1 else none)
-            return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.kind)
+            return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.track.init_kind)
         self.track.solver_failures = 0
         self.track.consistent = res.checks is None or res.checks.ok
         if res.checks is not None and not res.checks.ok and self.cfg.reinit_on_check_failure:
@@ -200,11 +189,26 @@ class VioStage:
             self.track.set(index, inp.t_ns, base.T_world_body)
             restart = self._reinit(base, obs, imu, landmarks)
             return VioReport(VioPhase.VIO, restart, res.keyframe, last_init=self.last_init, checks=res.checks,
-                             init_kind=self.kind)
+                             init_kind=self.track.init_kind, zero_velocity=zv)
         self.track.set(index, inp.t_ns, est.state.T_world_body)
         self.track.update(self.backend.window())
         return VioReport(VioPhase.VIO, est, res.keyframe, last_init=self.last_init, checks=res.checks,
-                         init_kind=self.kind)
+                         init_kind=self.track.init_kind, zero_velocity=zv)
+
+    def _zero_velocity(self, inp: VioFrameInput, events: list[str]) -> ZeroVelocity:
+        """The standstill verdict on the frame (:mod:`amrvio.pipeline.zero_velocity`); a frame
+        whose tracks were not moved into its image restarts the detector's window. The start
+        and end of a standstill are logged (``vio_zero_velocity:start`` / ``:end``)."""
+        was = self.still.last.still
+        if inp.usable:
+            zv = self.still.update(inp.t_ns, inp.ids, inp.uv, self.imu.span(
+                inp.t_ns - int(self.cfg.zero_velocity.window_s * 1e9) - 1, inp.t_ns))
+        else:
+            self.still.reset()
+            zv = self.still.last
+        if zv.still != was:
+            events.append("vio_zero_velocity:" + (f"start:flow_px={zv.flow_px:.3f}" if zv.still else "end"))
+        return zv
 
     def finish(self, T_world_cam: F64, statuses: list[PoseStatus],
                segments: list[Segment]) -> tuple[BodyTrajectory | None, list[PoseStatus]]:
@@ -246,7 +250,7 @@ class VioStage:
                 for i in range(index + 1):  # the platform stood still since the start
                     if i not in self.track.poses and est.state is not None:
                         self.track.poses[i] = est.state.T_world_body.matrix()
-                return VioReport(VioPhase.VIO, est, True, static=static, init_kind=self.kind)
+                return VioReport(VioPhase.VIO, est, True, static=static, init_kind=self.track.init_kind)
         attempt = None
         if inp.vo_keyframe is not None:
             seg, kf = inp.vo_keyframe
@@ -258,7 +262,7 @@ class VioStage:
             est = self.backend.propagate(inp.t_ns, self.imu.span(inp.t_ns - 10**8, inp.t_ns + 10**8))
             if est.state is not None:
                 self.track.set(index, inp.t_ns, est.state.T_world_body)
-            return VioReport(VioPhase.VIO, est, True, attempt, static, self.last_init, init_kind=self.kind)
+            return VioReport(VioPhase.VIO, est, True, attempt, static, self.last_init, init_kind=self.track.init_kind)
         return VioReport(VioPhase.VO, None, False, attempt, static, self.last_init)
 
     def _try_static(self, t_ns: int, obs: VisualObservations) -> StaticInitResult | None:
@@ -291,13 +295,13 @@ class VioStage:
         sig = PriorSigmas(rotation_rad=float(np.radians(max(static.tilt_std_deg, 0.05))), position_m=1e-3,
                           velocity_m_s=0.01, gyro_bias_rad_s=float(max(np.max(g_std), 5e-4)),
                           accel_bias_m_s2=StaticInitConfig().accel_bias_sigma_m_s2)
-        self.kind = "static"
+        self.track.init_kind = "static"
         return self.backend.initialise(VioInitialState(state, sig), self.imu.span(t_ns - 10**8, t_ns), obs)
 
     def _try_dynamic(self, inp: VioFrameInput, obs: VisualObservations, events: list[str]) -> ViInitResult | None:
-        kfs = [k for k in self.vo_keyframes if (inp.t_ns - k[0]) * 1e-9 <= self.cfg.max_init_window_s]
+        kfs = [k for k in self.vo_keyframes if (inp.t_ns - k[0]) * 1e-9 <= self.cfg.dynamic_init.max_window_s]
         self.vo_keyframes = kfs
-        if len(kfs) < self.cfg.min_init_keyframes:
+        if len(kfs) < self.cfg.dynamic_init.min_keyframes:
             return None
         seg_id = kfs[-1][1]
         seg = self.mapping.segments[seg_id]
@@ -335,7 +339,7 @@ class VioStage:
         sig = PriorSigmas(velocity_m_s=max(0.05, 3 * s * 0.01), landmark_m=max(0.02, 3 * float(st.scale_std) * 2))
         self.backend.initialise(VioInitialState(state, sig, ids, X), imu.window(inp.t_ns - 10**8, inp.t_ns), obs)
         self.anchor = self.anchor or VoAnchor(seg_id, s, R_wv)
-        self.kind = "dynamic"
+        self.track.init_kind = "dynamic"
         if use is res:
             events.append(f"vi_init_ok:scale={s:.5g}:std={st.scale_std:.3g}")
         return res
@@ -386,7 +390,7 @@ class VioStage:
         sig = PriorSigmas(rotation_rad=0.02, position_m=0.02, velocity_m_s=0.2, gyro_bias_rad_s=0.01,
                           accel_bias_m_s2=0.2, landmark_m=0.1)
         ids, X = landmarks
-        self.kind = "reinit"
+        self.track.init_kind = "reinit"
         return self.backend.initialise(VioInitialState(base, sig, ids, X), imu, obs)
 
 
