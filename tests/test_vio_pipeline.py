@@ -225,3 +225,40 @@ def test_repeated_solver_failures_escalate_instead_of_looping(sim_dir: Path, tmp
     assert seeds[0] > 0 and seeds[1] == 0  # the landmarks, then none
     for i, _ in solver:
         assert res.records[i].status is PoseStatus.BRIDGED
+
+
+@pytest.mark.parametrize("failed,keeps", [("reprojection", False), ("state_jump", False), ("scale", True),
+                                          ("bias_drift", True)])
+def test_a_restart_after_a_failed_check_keeps_the_landmarks_unless_vision_is_the_suspect(
+        sim_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, failed: str, keeps: bool) -> None:
+    """One update whose ``failed`` check fails: a state jump or a reprojection failure restarts
+    the smoother without its landmarks (they pulled the state, and would pull the restart the same
+    way); a scale or bias failure restarts with them (they hold the scale)."""
+    from amrvio.estimator.vio_backend import VioBackend
+    from amrvio.estimator.vio_checks import CheckName, CheckResult, CheckStatus, ConsistencyReport
+    from amrvio.pipeline.vio_stage import VioStage
+
+    calls = {"n": 0}
+    real_add, real_reinit = VioBackend.add_frame, VioStage._reinit
+    seeds: list[int] = []
+    available: list[int] = []
+
+    def failing_add(self: VioBackend, t_ns: int, *args: object, **kw: object) -> object:
+        available.append(len(self.landmarks()[0]))
+        res = real_add(self, t_ns, *args, **kw)  # type: ignore[arg-type]
+        calls["n"] += 1
+        if calls["n"] == 15:
+            bad = CheckResult(CheckName(failed), CheckStatus.FAIL, 2.0, 1.0, "forced by the test")
+            return dataclasses.replace(res, checks=ConsistencyReport(t_ns, (bad,)))
+        return res
+
+    def recording_reinit(self: VioStage, base: object, obs: object, imu: object, landmarks: tuple) -> object:
+        seeds.append(len(landmarks[0]))
+        return real_reinit(self, base, obs, imu, landmarks)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(VioBackend, "add_frame", failing_add)
+    monkeypatch.setattr(VioStage, "_reinit", recording_reinit)
+    res = run(str(sim_dir), out=tmp_path / "out", report=False)
+    assert [e for r in res.records for e in r.events if e.startswith("vio_reinit")] == [f"vio_reinit:{failed}"]
+    assert available[14] > 0  # the smoother had landmarks before the failed update
+    assert seeds == [available[14]] if keeps else seeds == [0]

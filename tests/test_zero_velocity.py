@@ -98,3 +98,24 @@ def test_health_columns_say_whether_the_update_had_zero_velocity() -> None:
     assert VioReport(VioPhase.VIO, zero_velocity=moving).health_fields()["vio_zero_velocity"] == "0"
     unjudged = VioReport(VioPhase.VIO, zero_velocity=ZeroVelocity(False, float("nan"), 3, None)).health_fields()
     assert unjudged["vio_zero_velocity"] == "" and unjudged["vio_zero_velocity_flow_px"] == ""
+
+
+def test_observe_logs_the_start_and_end_of_a_standstill_and_resets_on_an_untracked_frame() -> None:
+    from amrvio.pipeline.imu_log import ImuLog
+
+    log = ImuLog(10.0)
+    log.add(_imu(3.0))
+    det = ZeroVelocityDetector(ZeroVelocityConfig(window_s=0.3))
+    ids, uv = np.arange(40, dtype=np.int64), np.random.default_rng(0).uniform(20, 300, (40, 2))
+    events: list[list[str]] = []
+    for k in range(20):
+        ev: list[str] = []
+        t_ns = int(round((k + 0.5) / FPS * 1e9))
+        det.observe(t_ns, None if k == 12 else ids, uv + (0.0 if k < 15 else 0.5 * (k - 14)), log, ev)
+        events.append(ev)
+    # still from frame 6 (a full window); frame 12 is untracked: the window starts again at 13,
+    # full at 19, but the tracks move by (0.5, 0.5) px a frame from frame 15 on
+    assert events[6] == ["vio_zero_velocity:start:flow_px=0.000"]
+    assert events[12] == ["vio_zero_velocity:end"]
+    assert all(not e for k, e in enumerate(events) if k not in (6, 12))
+    assert not det.last.still and det.last.flow_px == pytest.approx(2.5 * np.sqrt(2.0))  # (2.5, 2.5) px

@@ -16,8 +16,9 @@ KLT tracks (ids and undistorted pixels) and the VO keyframe the frame became, if
    standstill (the tracks and the IMU both say so, :mod:`amrvio.pipeline.zero_velocity`) adds
    ``v = 0`` to its update, which stops the velocity drifting while the platform stands;
 4. a failed consistency check re-initialises the smoother at its own IMU prediction (logged as a
-   ``vio_reinit`` event), and so does a solver failure (with the old landmarks, then without);
-   an IMU gap, or ``MAX_SOLVER_FAILURES`` solver failures in a row, go back to step 2.
+   ``vio_reinit`` event), with its landmarks unless the state jump or the reprojection check
+   failed, and so does a solver failure (with the old landmarks, then without); an IMU gap, or
+   ``MAX_SOLVER_FAILURES`` solver failures in a row, go back to step 2.
 
 :class:`BodyTrack` keeps each frame's body pose, updated while its state stays in the window.
 """
@@ -64,7 +65,7 @@ from amrvio.pipeline.vio_report import (
     VoAnchor,
     vio_input,
 )
-from amrvio.pipeline.zero_velocity import ZeroVelocity, ZeroVelocityDetector
+from amrvio.pipeline.zero_velocity import ZeroVelocityDetector
 from amrvio.types.lie import SE3, SO3, Sim3
 from amrvio.types.sensors import ImuData
 
@@ -85,6 +86,7 @@ STILL_PX = 0.5
 """Median track motion (px) since the first frame below which the camera stands still."""
 MAX_SOLVER_FAILURES = 3
 """Consecutive solver failures after which the smoother waits for a new initialisation."""
+NO_LANDMARKS = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))  # a restart without landmarks
 
 
 class VioStage:
@@ -139,7 +141,7 @@ class VioStage:
         """The frame's report; its body pose goes into :attr:`track`; events are appended."""
         imu = self.frame_imu(inp.t_ns, inp.imu)
         obs = VisualObservations(inp.ids, inp.uv) if inp.usable else VisualObservations.empty()
-        zv = self._zero_velocity(inp, events)
+        zv = self.still.observe(inp.t_ns, inp.ids if inp.usable else None, inp.uv, self.imu, events)
         if not self.running:
             return self._before(index, inp, obs, events)
         if not inp.usable or len(obs) < self.cfg.min_tracks or inp.smear_px > self.cfg.max_smear_px:
@@ -172,8 +174,7 @@ class VioStage:
                 self.vo_keyframes.clear()
                 return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.track.init_kind)
             events.append(f"vio_reinit:{est.status.value}")
-            none = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
-            self._reinit(pred, obs, imu, landmarks if self.track.solver_failures == 1 else none)
+            self._reinit(pred, obs, imu, landmarks if self.track.solver_failures == 1 else NO_LANDMARKS)
             return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.track.init_kind)
         self.track.solver_failures = 0
         self.track.consistent = res.checks is None or res.checks.ok
@@ -187,28 +188,16 @@ class VioStage:
             # the rejected update gives no pose: neither to this frame nor to the window's frames
             # (it moved them too); the frame is the restarted smoother's first state
             self.track.set(index, inp.t_ns, base.T_world_body)
-            restart = self._reinit(base, obs, imu, landmarks)
+            # a state jump or landmarks that no longer fit: they are the suspects (kept, they pull
+            # the restart the same way); a scale or bias failure keeps them (they hold the scale)
+            suspect = "state_jump" in failed or "reprojection" in failed
+            restart = self._reinit(base, obs, imu, NO_LANDMARKS if suspect else landmarks)
             return VioReport(VioPhase.VIO, restart, res.keyframe, last_init=self.last_init, checks=res.checks,
                              init_kind=self.track.init_kind, zero_velocity=zv)
         self.track.set(index, inp.t_ns, est.state.T_world_body)
         self.track.update(self.backend.window())
         return VioReport(VioPhase.VIO, est, res.keyframe, last_init=self.last_init, checks=res.checks,
                          init_kind=self.track.init_kind, zero_velocity=zv)
-
-    def _zero_velocity(self, inp: VioFrameInput, events: list[str]) -> ZeroVelocity:
-        """The standstill verdict on the frame (:mod:`amrvio.pipeline.zero_velocity`); a frame
-        whose tracks were not moved into its image restarts the detector's window. The start
-        and end of a standstill are logged (``vio_zero_velocity:start`` / ``:end``)."""
-        was = self.still.last.still
-        if inp.usable:
-            zv = self.still.update(inp.t_ns, inp.ids, inp.uv, self.imu.span(
-                inp.t_ns - int(self.cfg.zero_velocity.window_s * 1e9) - 1, inp.t_ns))
-        else:
-            self.still.reset()
-            zv = self.still.last
-        if zv.still != was:
-            events.append("vio_zero_velocity:" + (f"start:flow_px={zv.flow_px:.3f}" if zv.still else "end"))
-        return zv
 
     def finish(self, T_world_cam: F64, statuses: list[PoseStatus],
                segments: list[Segment]) -> tuple[BodyTrajectory | None, list[PoseStatus]]:

@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 
 from amrvio.errors import ConfigError
 from amrvio.imu.static import StandstillStatus, detect_standstill
+from amrvio.pipeline.imu_log import ImuLog
 from amrvio.types.sensors import ImuData
 
 F64 = NDArray[np.float64]
@@ -100,6 +101,21 @@ class ZeroVelocityDetector:
         chain: the next verdict needs a full window again)."""
         self._frames.clear()
         self.last = NOT_JUDGED
+
+    def observe(self, t_ns: int, ids: I64 | None, uv_px: F64, imu: ImuLog, events: list[str]) -> ZeroVelocity:
+        """The frame loop's call: :meth:`update` with the samples of ``imu`` (the stage's log)
+        over the window, or :meth:`reset` for a frame whose tracks were not moved into its image
+        (``ids`` None). The start and end of a standstill are appended to ``events``
+        (``vio_zero_velocity:start:flow_px=F`` / ``vio_zero_velocity:end``)."""
+        was = self.last.still
+        if ids is None:
+            self.reset()
+        else:
+            self.update(t_ns, ids, uv_px, imu.span(t_ns - int(round(self.cfg.window_s * 1e9)) - TOL_NS, t_ns))
+        if self.last.still != was:
+            events.append("vio_zero_velocity:" + (f"start:flow_px={self.last.flow_px:.3f}" if self.last.still
+                                                  else "end"))
+        return self.last
 
     def update(self, t_ns: int, ids: I64, uv_px: F64, imu: ImuData) -> ZeroVelocity:
         """Judge the frame at ``t_ns`` with its tracks ``ids`` (N,) / ``uv_px`` (N, 2) and the IMU
