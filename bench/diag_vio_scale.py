@@ -72,15 +72,17 @@ def _truth_fix(seq: Path, noise_px: float, reject_px: float | None) -> ObsFix:
     cam = meta["derived"]["camera"]
     K = np.array([[cam["fx"], 0.0, cam["cx"]], [0.0, cam["fy"], cam["cy"]], [0.0, 0.0, 1.0]])
     T_body_cam = np.array(meta["derived"]["T_body_cam"])
+    # the renderer's scene frame (a replay's trajectory is shifted into the scene; identity else)
+    T_scene_world = np.array(meta["derived"].get("T_scene_world", np.eye(4)))
     rng = np.random.default_rng(0)
     first: dict[int, F64 | None] = {}  # track id -> its true world point (None: on a depth edge)
 
     def fix(t_ns: int, obs: VisualObservations) -> VisualObservations:
         T_wc = gt.interpolated_at([t_ns * 1e-9]).matrices()[0] @ T_body_cam
-        T_wc_se3 = SE3.from_matrix(T_wc)
+        T_wc_se3, T_sc = SE3.from_matrix(T_wc), SE3.from_matrix(T_scene_world @ T_wc)
         new = [k for k, i in enumerate(obs.ids.tolist()) if i not in first]
         if new:
-            depth = renderer.depth(T_wc_se3)
+            depth = renderer.depth(T_sc)
             for k in new:
                 u, v = obs.uv_px[k]
                 iu, iv = int(round(u)), int(round(v))
