@@ -189,6 +189,21 @@ def test_a_rejected_update_gives_its_frame_the_state_the_smoother_restarts_from(
         assert np.linalg.norm(body.T_world_body[r.index, :3, 3] - vio.estimate.state.T_world_body.t) < 0.06
 
 
+def _record_restart_landmarks(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """How many landmarks each restart of the smoother (``VioStage._reinit``) is given, in order."""
+    from amrvio.pipeline.vio_stage import VioStage
+
+    real_reinit = VioStage._reinit
+    seeds: list[int] = []
+
+    def recording_reinit(self: VioStage, base: object, obs: object, imu: object, landmarks: tuple) -> object:
+        seeds.append(len(landmarks[0]))
+        return real_reinit(self, base, obs, imu, landmarks)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(VioStage, "_reinit", recording_reinit)
+    return seeds
+
+
 def test_repeated_solver_failures_escalate_instead_of_looping(sim_dir: Path, tmp_path: Path,
                                                               monkeypatch: pytest.MonkeyPatch) -> None:
     """Three updates in a row that the solver fails: the first restarts the smoother with the
@@ -196,11 +211,9 @@ def test_repeated_solver_failures_escalate_instead_of_looping(sim_dir: Path, tmp
     until the VO initialises it again; each of the three frames still gets the IMU's pose."""
     from amrvio.estimator.vio_backend import VioBackend
     from amrvio.estimator.vio_types import VioEstimate, VioStatus
-    from amrvio.pipeline.vio_stage import VioStage
 
     calls = {"n": 0}
-    real_add, real_reinit = VioBackend.add_frame, VioStage._reinit
-    seeds: list[int] = []
+    real_add = VioBackend.add_frame
 
     def failing_add(self: VioBackend, t_ns: int, *args: object, **kw: object) -> object:
         res = real_add(self, t_ns, *args, **kw)  # type: ignore[arg-type]
@@ -211,12 +224,8 @@ def test_repeated_solver_failures_escalate_instead_of_looping(sim_dir: Path, tmp
             return dataclasses.replace(res, estimate=est, checks=None)
         return res
 
-    def recording_reinit(self: VioStage, base: object, obs: object, imu: object, landmarks: tuple) -> object:
-        seeds.append(len(landmarks[0]))
-        return real_reinit(self, base, obs, imu, landmarks)  # type: ignore[arg-type]
-
     monkeypatch.setattr(VioBackend, "add_frame", failing_add)
-    monkeypatch.setattr(VioStage, "_reinit", recording_reinit)
+    seeds = _record_restart_landmarks(monkeypatch)
     res = run(str(sim_dir), out=tmp_path / "out", report=False)
     solver = [(r.index, e) for r in res.records for e in r.events if "solver_failed" in e]
     assert [e for _, e in solver] == ["vio_reinit:solver_failed", "vio_reinit:solver_failed",
@@ -236,11 +245,9 @@ def test_a_restart_after_a_failed_check_keeps_the_landmarks_unless_vision_is_the
     way); a scale or bias failure restarts with them (they hold the scale)."""
     from amrvio.estimator.vio_backend import VioBackend
     from amrvio.estimator.vio_checks import CheckName, CheckResult, CheckStatus, ConsistencyReport
-    from amrvio.pipeline.vio_stage import VioStage
 
     calls = {"n": 0}
-    real_add, real_reinit = VioBackend.add_frame, VioStage._reinit
-    seeds: list[int] = []
+    real_add = VioBackend.add_frame
     available: list[int] = []
 
     def failing_add(self: VioBackend, t_ns: int, *args: object, **kw: object) -> object:
@@ -252,12 +259,8 @@ def test_a_restart_after_a_failed_check_keeps_the_landmarks_unless_vision_is_the
             return dataclasses.replace(res, checks=ConsistencyReport(t_ns, (bad,)))
         return res
 
-    def recording_reinit(self: VioStage, base: object, obs: object, imu: object, landmarks: tuple) -> object:
-        seeds.append(len(landmarks[0]))
-        return real_reinit(self, base, obs, imu, landmarks)  # type: ignore[arg-type]
-
     monkeypatch.setattr(VioBackend, "add_frame", failing_add)
-    monkeypatch.setattr(VioStage, "_reinit", recording_reinit)
+    seeds = _record_restart_landmarks(monkeypatch)
     res = run(str(sim_dir), out=tmp_path / "out", report=False)
     assert [e for r in res.records for e in r.events if e.startswith("vio_reinit")] == [f"vio_reinit:{failed}"]
     assert available[14] > 0  # the smoother had landmarks before the failed update
