@@ -60,7 +60,8 @@ class PipelineConfig:
 #: in image pixels: a motion of N image pixels is the same angle at any tracking level
 NOISE_GATES_PX: tuple[str, ...] = (
     "tracking.klt.fb_thresh_px", "tracking.klt.ransac_thresh_px", "tracking.pnp_thresh_px",
-    "tracking.huber_px", "tracking.rotation_max_px", "init.two_view.ransac_thresh_px",
+    "tracking.huber_px", "tracking.rotation_max_px", "tracking.scaled_relative.thresh_px",
+    "tracking.scaled_relative.point_thresh_px", "init.two_view.ransac_thresh_px",
     "init.two_view.max_reproj_px", "init.pnp_thresh_px", "recovery.reloc.pnp_thresh_px",
     "mapping.anchor.max_shift_px", "mapping.mapper.huber_px", "mapping.mapper.cull_px",
     "mapping.mapper.tri_max_reproj_px",
@@ -185,6 +186,13 @@ HELP: dict[str, str] = {
     "tracking.rotation_only": "pose by rotation alone when PnP fails and one rotation explains the flow",
     "tracking.rotation_max_px": "median residual under which one rotation explains the flow (px)",
     "tracking.retry_unpredicted": "when PnP fails, track again without the motion prediction",
+    "tracking.scaled_relative": "when PnP fails: the tracks' essential matrix, its length from the map points",
+    "tracking.scaled_relative.enabled": "try it before the direct-alignment fallback",
+    "tracking.scaled_relative.min_tracks": "essential-matrix inliers needed",
+    "tracking.scaled_relative.min_points": "map points that must agree on the step length",
+    "tracking.scaled_relative.thresh_px": "essential-matrix RANSAC threshold (px)",
+    "tracking.scaled_relative.point_thresh_px": "reprojection error of an agreeing map point (px)",
+    "tracking.scaled_relative.min_flow_px": "rotation-compensated median flow needed (px)",
     "init": "two-view initialisation",
     "init.two_view": "gates of the two-view geometry",
     "init.two_view.min_points": "tracks shared with the reference needed to try",

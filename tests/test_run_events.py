@@ -4,6 +4,7 @@ their causes, flag ranges, strict JSON."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -18,7 +19,7 @@ from amrvio.estimator.local_ba import BAReport, BAStatus
 from amrvio.estimator.local_mapping import KeyframeReport
 from amrvio.estimator.mapper import TriangulationReport
 from amrvio.frontend.keyframe_policy import KeyframeReason
-from amrvio.frontend.tracker import TrackingReport, TrackOutcome
+from amrvio.frontend.tracking_types import TrackingReport, TrackOutcome
 from amrvio.geometry.ground_plane import PlaneStatus
 from amrvio.geometry.two_view import TwoViewModel, TwoViewStatus
 from amrvio.io.base import SkippedFrame
@@ -95,6 +96,16 @@ def test_each_event_string_is_a_line_with_its_report() -> None:
     for e in lines:  # strict JSON, one line
         text = event_line(e)
         assert "\n" not in text and json.loads(text) == e
+
+
+def test_scaled_relative_event_carries_the_pnp_failure_and_the_points() -> None:
+    rec = dataclasses.replace(
+        _rec(7, events=("scaled_relative",)),
+        tracking=TrackingReport(TrackOutcome.SCALED_RELATIVE, 900, 21, 1.0, 0.0, False,
+                                "too_few_inliers"))
+    (line,) = frame_events(rec)
+    assert line["type"] == "scaled_relative" and line["pnp_status"] == "too_few_inliers"
+    assert line["tracking"]["outcome"] == "scaled_relative" and line["tracking"]["n_inliers"] == 21
 
 
 def test_jsonable_values() -> None:

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.estimator.mapper import Mapper
-from amrvio.frontend.tracker import Observations
+from amrvio.frontend.tracking_types import Observations
 from amrvio.frontend.tracks import TrackSet
 from amrvio.geometry.pnp import solve_pnp
 from amrvio.geometry.two_view import (

@@ -11,35 +11,24 @@ Poses inside are 4x4 ``T_cam_world`` arrays of the current map segment.
 from __future__ import annotations
 
 import time
-from collections import deque
-from dataclasses import dataclass, field
-from enum import Enum
-from typing import Protocol
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.frontend.direct import DirectConfig, align_direct
 from amrvio.frontend.klt import KltConfig, KltResult, KltTracker, detect_bucketed, predict_tracks
+from amrvio.frontend.tracking_types import Landmarks, MotionModel, Observations, TrackingReport, TrackOutcome, TrackStep
 from amrvio.frontend.tracks import UNANCHORED, TrackSet
 from amrvio.geometry.pnp import PnPResult, solve_pnp
 from amrvio.geometry.projection import normalized_to_bearings, pixels_to_normalized, project
+from amrvio.geometry.scaled_relative import ScaledRelativeConfig, ScaledRelativeResult, scaled_relative_pose
 from amrvio.geometry.two_view import robust_rotation
 from amrvio.types.lie import se3_matrix_inverse
 
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 U8 = NDArray[np.uint8]
-
-
-class Landmarks(Protocol):
-    """What the tracker reads of a map: point positions by track id (``xyz`` (M, 3))."""
-
-    xyz: F64
-
-    def points_of(self, track_ids: I64) -> NDArray[np.bool_]: ...
-
-    def ensure_capacity(self, n_tracks: int) -> None: ...
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,73 +49,7 @@ class TrackingConfig:
     rotation_only: bool = True
     rotation_max_px: float = 1.0
     retry_unpredicted: bool = True
-
-
-class TrackOutcome(Enum):
-    """What the tracker made of a frame."""
-
-    STARTED = "started"  # a new reference image: tracks detected, no pose
-    INIT_TRACKED = "init_tracked"  # tracked towards the initialisation reference, no pose yet
-    SKIPPED_BLURRED = "skipped_blurred"  # blurred before the map exists: not used
-    TRACKED = "tracked"  # PnP pose; tracks committed
-    TRACKED_BLURRED = "tracked_blurred"  # PnP pose on a blurred frame; tracks not committed
-    PREDICTED = "predicted"  # blurred and PnP failed: the motion-model pose
-    DIRECT = "direct_fallback"  # pose from direct alignment; tracks re-seeded from the map
-    ROTATION = "rotation_only"  # too few map points, but one rotation explains the flow
-    REPEATED = "repeated_frame"  # the image repeats the last one exactly: its pose, no tracking
-    LOST = "lost"  # no pose: tracking must restart
-
-
-@dataclass(frozen=True, slots=True)
-class TrackingReport:
-    """For the frame record: outcome, tracks alive after the frame, PnP inliers, the affine
-    brightness change (a, b) used by KLT, whether direct alignment gave the prior, and the PnP
-    status when PnP ran."""
-
-    outcome: TrackOutcome
-    n_tracks: int
-    n_inliers: int
-    brightness_a: float
-    brightness_b: float
-    direct_prior: bool
-    pnp_status: str | None
-
-
-@dataclass(frozen=True, slots=True)
-class Observations:
-    """PnP inlier tracks of a frame: ids (M,) and pixels (M, 2), for the final refinement."""
-
-    ids: I64
-    uv: F64
-
-
-@dataclass(frozen=True, slots=True)
-class TrackStep:
-    """A tracked frame: the report, the pose ``T_cam_world`` (4x4; the prediction when the
-    outcome has no measured pose) and the inlier observations when PnP succeeded."""
-
-    report: TrackingReport
-    T_cam_world: F64
-    observations: Observations | None
-
-
-class MotionModel:
-    """Constant velocity: ``velocity`` = T_k_k-1 per frame, ``T_last`` = T_cam_world of the last
-    good frame, and recent speeds in global units per frame (``speeds``)."""
-
-    def __init__(self) -> None:
-        self.velocity: F64 = np.eye(4)
-        self.T_last: F64 | None = None
-        self.speeds: deque[float] = deque(maxlen=50)
-
-    def guess(self) -> F64:
-        """Pose guess for a frame without a measurement."""
-        return np.eye(4) if self.T_last is None else self.velocity @ self.T_last
-
-    def typical_speed(self) -> float:
-        """Median of the recent non-zero speeds (1.0 when there are none)."""
-        moving = [v for v in self.speeds if v > 0]
-        return float(np.median(moving)) if moving else 1.0
+    scaled_relative: ScaledRelativeConfig = field(default_factory=ScaledRelativeConfig)
 
 
 class Tracker:
@@ -245,6 +168,10 @@ class Tracker:
                 self.gap += 1
                 return TrackStep(self._report(TrackOutcome.PREDICTED, res, 0, prior,
                                               pnp.status.value), T_pred, None)
+            rel = self._scaled_relative(res, has, m, T_last) if cfg.scaled_relative.enabled else None
+            if rel is not None and rel.ok:
+                return self._relative_step(img, rel, res, prior, pnp.status.value, steps,
+                                           segment_scale)
             # features scarce: direct alignment to the last good image as the fallback
             d = self._direct(img, V, m) if cfg.direct_fallback else None
             if d is not None:
@@ -266,17 +193,63 @@ class Tracker:
         # commit the tracks: drop KLT failures and PnP outliers
         bad = np.zeros(len(tr.ids), dtype=bool)
         bad[np.flatnonzero(use)[~pnp.inliers]] = True
+        self._commit(img, res, res.ok & ~bad, T_cw, steps, segment_scale)
+        return TrackStep(self._report(TrackOutcome.TRACKED, res, n_inl, prior, pnp.status.value),
+                         T_cw, obs)
+
+    def _commit(self, img: U8, res: KltResult, keep: NDArray[np.bool_], T_cw: F64, steps: int,
+                segment_scale: float) -> None:
+        """Move the tracks into ``img`` and keep ``keep``; ``T_cw`` becomes the last pose
+        (``steps`` frames after the previous one) and updates the motion model."""
+        mot, tr = self.motion, self.tracks
+        if mot.T_last is None:
+            raise RuntimeError("Tracker: commit without a previous pose")
         tr.move(res.pts)
-        tr.keep(res.ok & ~bad)
+        tr.keep(keep)
         self.prev_img = img
-        dT = T_cw @ se3_matrix_inverse(T_last)
+        dT = T_cw @ se3_matrix_inverse(mot.T_last)
         if steps == 1:
             mot.velocity = dT
         mot.speeds.append(segment_scale * float(np.linalg.norm(dT[:3, 3])) / steps)
         mot.T_last = T_cw
         self.gap = 0
-        return TrackStep(self._report(TrackOutcome.TRACKED, res, n_inl, prior, pnp.status.value),
-                         T_cw, obs)
+
+    def _scaled_relative(self, res: KltResult, has: NDArray[np.bool_], m: Landmarks,
+                         T_last: F64) -> ScaledRelativeResult:
+        """The step from the last committed image by the tracks' essential matrix, its length
+        from the map points (segment units)."""
+        tr = self.tracks
+        ok = res.ok
+        xyz = np.zeros((int(ok.sum()), 3))
+        has_ok = has[ok]
+        X = m.xyz[tr.ids[ok][has_ok]]
+        xyz[has_ok] = X @ T_last[:3, :3].T + T_last[:3, 3]
+        focal = 0.5 * (self.K[0, 0] + self.K[1, 1])
+        t0 = time.perf_counter()
+        rel = scaled_relative_pose(pixels_to_normalized(tr.pts[ok], self.K),
+                                   pixels_to_normalized(res.pts[ok], self.K), has_ok, xyz, focal,
+                                   replace(self.cfg.scaled_relative, seed=self.seed))
+        self._toc("scaled_relative", t0)
+        # back to all tracks
+        inl = np.zeros(len(ok), dtype=bool)
+        inl[ok] = rel.track_inliers
+        pts = np.zeros(len(ok), dtype=bool)
+        pts[ok] = rel.point_inliers
+        return replace(rel, track_inliers=inl, point_inliers=pts)
+
+    def _relative_step(self, img: U8, rel: ScaledRelativeResult, res: KltResult, prior: bool,
+                       pnp: str, steps: int, segment_scale: float) -> TrackStep:
+        """Pose from :meth:`_scaled_relative`; the essential matrix's inliers are committed."""
+        T_last = self.motion.T_last
+        if T_last is None:
+            raise RuntimeError("Tracker: relative step without a previous pose")
+        T_cw = rel.T_cur_prev @ T_last
+        tr = self.tracks
+        obs = Observations(tr.ids[rel.point_inliers].copy(), res.pts[rel.point_inliers].copy())
+        self._commit(img, res, res.ok & rel.track_inliers, T_cw, steps, segment_scale)
+        n = int(rel.point_inliers.sum())
+        return TrackStep(self._report(TrackOutcome.SCALED_RELATIVE, res, n, prior, pnp), T_cw,
+                         obs)
 
     def _klt_pnp(self, img: U8, pred: F64 | None, wide: bool, has: NDArray[np.bool_],
                  m: Landmarks, T_guess: F64) -> tuple[KltResult, NDArray[np.bool_], PnPResult]:
@@ -374,5 +347,4 @@ class Tracker:
         return TrackStep(self._report(TrackOutcome.DIRECT, res, 0, prior), T_cw, None)
 
 
-__all__ = ["Landmarks", "MotionModel", "Observations", "TrackOutcome", "TrackStep", "Tracker", "TrackingConfig",
-           "TrackingReport"]
+__all__ = ["Tracker", "TrackingConfig"]

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from amrvio.estimator.local_mapping import Segment
 from amrvio.estimator.vo_map import VoMap
-from amrvio.frontend.tracker import Observations
+from amrvio.frontend.tracking_types import Observations
 from amrvio.geometry.pnp import refine_pose_huber
 from amrvio.geometry.projection import project
 from amrvio.pipeline.records import PoseStatus

@@ -1,10 +1,11 @@
 """``events.jsonl``: what happened in a run, one JSON object a line, from the frame records.
 
 Each frame's ``events`` strings (``init_ok:ref=K``, ``init_failed:STATUS``, ``lost:STATUS``,
-``relocalised:N``, ``rotation_only``, ``segment_scale_guess:S``, ``direct_fallback``,
-``direct_prior``, and any a later stage adds) become one line each, with the report that goes with
-them: the initialisation attempt (:class:`~amrvio.estimator.initializer.InitResult`), the tracking
-report of a loss, the keyframe made. A frame with an initialisation attempt and no init event
+``relocalised:N``, ``rotation_only``, ``scaled_relative``, ``segment_scale_guess:S``,
+``direct_fallback``, ``direct_prior``, and any a later stage adds) become one line each, with the
+report that goes with them: the initialisation attempt
+(:class:`~amrvio.estimator.initializer.InitResult`), the tracking report of a loss or of a
+scaled relative pose, the keyframe made. A frame with an initialisation attempt and no init event
 gets an ``init_attempt`` line; every keyframe a ``keyframe`` line (its triangulation and BA
 reports); every camera-height reading a ``scale_reading`` line; every visual-inertial
 initialisation a ``vi_init`` line (status, advice, excitation, figures, state) or a
@@ -108,8 +109,10 @@ def _from_string(rec: FrameRecord, event: str) -> dict[str, Any]:
     elif name == "init_failed":
         out["status"] = value
         out["init"] = init_report(rec)
-    elif name == "lost":
-        out["pnp_status"] = value
+    elif name in ("lost", "scaled_relative"):
+        # scaled_relative: PnP failed (pnp_status) and the tracks' essential matrix posed the
+        # frame; the tracking report's n_inliers counts the map points that fixed the length
+        out["pnp_status"] = value or (rec.tracking.pnp_status if rec.tracking is not None else None)
         out["tracking"] = jsonable(rec.tracking)
     elif name == "relocalised":
         out["n_matches"] = _number(value)

@@ -24,7 +24,8 @@ from amrvio.estimator.initializer import Initializer, InitResult
 from amrvio.estimator.local_mapping import KeyframeReport, LocalMapping
 from amrvio.estimator.scale_sources import make_scale_source
 from amrvio.frontend.keyframe_policy import KeyframeReason
-from amrvio.frontend.tracker import Observations, Tracker, TrackingReport, TrackOutcome
+from amrvio.frontend.tracker import Tracker
+from amrvio.frontend.tracking_types import Observations, TrackingReport, TrackOutcome
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
 from amrvio.pipeline.records import EstimatorReport, FrameRecord, PipelineOutput, PoseStatus
 from amrvio.pipeline.recovery import MapRecovery, implausible_jump, link_to_previous
@@ -286,6 +287,8 @@ class Pipeline:
         rep = step.report
         if rep.direct_prior:
             events.append("direct_prior")
+        if rep.outcome in (TrackOutcome.DIRECT, TrackOutcome.ROTATION, TrackOutcome.SCALED_RELATIVE):
+            events.append(rep.outcome.value)  # a fallback pose (SCALED_RELATIVE: see n_inliers)
         last_kf = len(seg.mapper.map.keyframes) - 1
         if rep.outcome is TrackOutcome.PREDICTED:
             return _Step(self._absolute(PoseStatus.INTERPOLATED, step.T_cam_world),
@@ -300,13 +303,10 @@ class Pipeline:
             return dataclasses.replace(lost, tracking=dataclasses.replace(lost.tracking,
                                                                           outcome=TrackOutcome.LOST))
         if rep.outcome is TrackOutcome.DIRECT:
-            events.append("direct_fallback")
             return _Step(self._on_keyframe(step.T_cam_world, last_kf, None), step.T_cam_world, rep)
         if rep.outcome is TrackOutcome.TRACKED_BLURRED:
             return _Step(self._on_keyframe(step.T_cam_world, last_kf, step.observations),
                          step.T_cam_world, rep)
-        if rep.outcome is TrackOutcome.ROTATION:
-            events.append("rotation_only")
         reason = self.mapping.keyframe_due(index, rep.n_inliers, tracks)
         if reason is KeyframeReason.NONE:
             return _Step(self._on_keyframe(step.T_cam_world, last_kf, step.observations),

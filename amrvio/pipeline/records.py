@@ -19,7 +19,7 @@ from amrvio.diagnostics.frame import FrameHealth
 from amrvio.estimator.camera_height import HeightEstimate
 from amrvio.estimator.initializer import InitResult
 from amrvio.estimator.local_mapping import KeyframeReport
-from amrvio.frontend.tracker import TrackingReport
+from amrvio.frontend.tracking_types import TrackingReport
 from amrvio.pipeline.vio_report import VioReport
 from amrvio.types.lie import SE3
 

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from amrvio.diagnostics.frame import FrameDiagnostics
 from amrvio.diagnostics.health import FrameHealth
 from amrvio.estimator.vo_map import VoMap
-from amrvio.frontend.tracker import TrackOutcome
+from amrvio.frontend.tracking_types import TrackOutcome
 from amrvio.frontend.tracks import TrackSet
 from amrvio.pipeline.vio_stage import VioStage
 from amrvio.types.sensors import ImuData

@@ -16,7 +16,7 @@ from amrvio.errors import ConfigError
 from amrvio.estimator.vi_init import ViInitResult
 from amrvio.estimator.vio_checks import ConsistencyReport
 from amrvio.estimator.vio_types import VioEstimate
-from amrvio.frontend.tracker import TrackOutcome
+from amrvio.frontend.tracking_types import TrackOutcome
 from amrvio.frontend.tracks import TrackSet
 from amrvio.imu.propagation import InertialState
 from amrvio.imu.static_init import StaticInitResult

@@ -1,16 +1,24 @@
-"""`amrvio run` on the first 60 frames of KITTI 00: every frame has a pose, ATE bound vs GT."""
+"""KITTI 00: `amrvio run` on the first 60 frames, and the VO on every 3rd frame of 0-199; every
+frame has a pose, ATE bound vs GT."""
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from amrvio.cli.main import main
+from amrvio.config import PipelineConfig
 from amrvio.eval.evaluate import evaluate
+from amrvio.frontend.tracking_types import TrackOutcome
+from amrvio.io.dataset import open_dataset
 from amrvio.io.trajectory import read_kitti, read_tum
+from amrvio.pipeline.records import PoseStatus
+from amrvio.pipeline.run import run_pipeline
+from amrvio.types.trajectory import Trajectory
 
 N = 60
 
@@ -38,3 +46,24 @@ def test_vo_kitti_first_60_frames(shared_data: Path, tmp_path: Path) -> None:
     assert res.scale is not None and abs(1.0 - res.scale) < 0.05
     assert (out / "keyframes.tum").is_file() and (out / "map.ply").is_file()
     assert (out / "scale_drift.csv").is_file()
+
+
+@pytest.mark.real_data
+def test_vo_kitti_every_3rd_frame_keeps_one_map(shared_data: Path) -> None:
+    """Every 3rd frame (3 m and up to 11 degrees per step): in the turn the map points die
+    faster than KLT tracks them, PnP gets too few inliers, and before the scaled relative pose
+    (essential matrix of all tracks, step length from the few map points) the run split into two
+    segments with a guessed scale (Sim3 ATE 1.58 % of the path)."""
+    ds = open_dataset(f"kitti:{shared_data / 'kitti00_0000-0199'}")
+    sub = dataclasses.replace(ds, frames=ds.frames[::3])
+    cfg = PipelineConfig()
+    out = run_pipeline(sub, dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, enabled=False)))
+    assert all(r.status is PoseStatus.TRACKED for r in out.records)
+    assert {r.segment for r in out.records} == {0}
+    used = [r.index for r in out.records if r.tracking is not None
+            and r.tracking.outcome is TrackOutcome.SCALED_RELATIVE]
+    assert used, "the case no longer needs the fallback: find one that does"
+    assert ds.groundtruth is not None
+    est = Trajectory.from_matrices(out.stamps_ns * 1e-9, out.T_world_cam)
+    res = evaluate(est, ds.groundtruth, align="sim3")
+    assert res.ate.rmse < 0.01 * res.path_length_m
