@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from amrvio.errors import ShapeError
-from amrvio.geometry.scaled_relative import (ScaledRelativeConfig, ScaledRelativeStatus,
-                                             scaled_relative_pose)
+from amrvio.geometry.scaled_relative import ScaledRelativeConfig, ScaledRelativeStatus, scaled_relative_pose
 from amrvio.types.lie import so3_exp
 
 F = 500.0

@@ -37,7 +37,11 @@ class TrackingConfig:
     rotation-only update: when PnP fails, a frame whose tracks one rotation explains (median
     residual under ``rotation_max_px``) is posed by that rotation about the last position;
     ``retry_unpredicted``: when PnP fails, KLT is run again from the previous positions (no
-    motion prediction, deep pyramid) before the fallbacks."""
+    motion prediction, deep pyramid) before the fallbacks. A blurred frame is posed against the
+    last good image and normally not tracked from; one whose PnP inliers reach
+    ``blurred_reference_ratio`` times those of the last good image tracks as well as a sharp
+    frame and becomes the reference (None: never), so that a long blurred stretch is not
+    tracked across an ever wider baseline."""
 
     klt: KltConfig = field(default_factory=KltConfig)
     direct: DirectConfig = field(default_factory=DirectConfig)
@@ -49,6 +53,7 @@ class TrackingConfig:
     rotation_only: bool = True
     rotation_max_px: float = 1.0
     retry_unpredicted: bool = True
+    blurred_reference_ratio: float | None = 0.5
     scaled_relative: ScaledRelativeConfig = field(default_factory=ScaledRelativeConfig)
 
 
@@ -65,6 +70,7 @@ class Tracker:
         self.motion = MotionModel()
         self.prev_img: U8 | None = None
         self.gap = 0  # frames since the last good (committed) image
+        self.ref_inliers: int | None = None  # PnP inliers of that image (None: not posed by PnP)
         self.mapped = False  # tracking against a map (else towards an initialisation reference)
         self.timings: dict[str, float] = {}
 
@@ -89,7 +95,7 @@ class Tracker:
         if not keep_tracks:
             self.tracks.clear()
         self.detect(img)
-        self.gap = 0
+        self.gap, self.ref_inliers = 0, None
         self.mapped = False
 
     def resume(self, img: U8, T_cam_world: F64) -> None:
@@ -97,7 +103,7 @@ class Tracker:
         before the loss is kept as the motion prior."""
         self.prev_img = img
         self.motion.T_last = T_cam_world.copy()
-        self.gap = 0
+        self.gap, self.ref_inliers = 0, None
         self.mapped = True
 
     def adopt_map_pose(self, T_cam_world: F64, velocity: F64) -> None:
@@ -105,6 +111,7 @@ class Tracker:
         self.motion.velocity = velocity
         self.motion.T_last = T_cam_world.copy()
         self.mapped = True
+        self.ref_inliers = None
 
     def _report(self, outcome: TrackOutcome, res: KltResult | None, n_inl: int = 0,
                 prior: bool = False, pnp: str | None = None) -> TrackingReport:
@@ -128,7 +135,7 @@ class Tracker:
         if blurred:
             self.gap += 1
             return self._report(TrackOutcome.SKIPPED_BLURRED, res)
-        self.gap = 0
+        self.gap, self.ref_inliers = 0, None
         self.tracks.keep(res.ok)
         self.tracks.move(res.pts[res.ok])
         self.prev_img = img
@@ -185,7 +192,8 @@ class Tracker:
         T_cw = pnp.T_cam_world
         n_inl = int(pnp.inliers.sum())
         obs = Observations(tr.ids[use][pnp.inliers].copy(), res.pts[use][pnp.inliers].copy())
-        if blurred:
+        ratio, ref = cfg.blurred_reference_ratio, self.ref_inliers
+        if blurred and (ratio is None or ref is None or n_inl < ratio * ref):
             # pose only; keep the last good image as the tracking reference
             self.gap += 1
             return TrackStep(self._report(TrackOutcome.TRACKED_BLURRED, res, n_inl, prior,
@@ -193,14 +201,15 @@ class Tracker:
         # commit the tracks: drop KLT failures and PnP outliers
         bad = np.zeros(len(tr.ids), dtype=bool)
         bad[np.flatnonzero(use)[~pnp.inliers]] = True
-        self._commit(img, res, res.ok & ~bad, T_cw, steps, segment_scale)
-        return TrackStep(self._report(TrackOutcome.TRACKED, res, n_inl, prior, pnp.status.value),
-                         T_cw, obs)
+        self._commit(img, res, res.ok & ~bad, T_cw, steps, segment_scale, n_inl)
+        outcome = TrackOutcome.BLURRED_REFERENCE if blurred else TrackOutcome.TRACKED
+        return TrackStep(self._report(outcome, res, n_inl, prior, pnp.status.value), T_cw, obs)
 
     def _commit(self, img: U8, res: KltResult, keep: NDArray[np.bool_], T_cw: F64, steps: int,
-                segment_scale: float) -> None:
+                segment_scale: float, n_pnp: int | None) -> None:
         """Move the tracks into ``img`` and keep ``keep``; ``T_cw`` becomes the last pose
-        (``steps`` frames after the previous one) and updates the motion model."""
+        (``steps`` frames after the previous one) and updates the motion model; ``n_pnp``: the
+        PnP inliers of ``img`` (None: posed otherwise)."""
         mot, tr = self.motion, self.tracks
         if mot.T_last is None:
             raise RuntimeError("Tracker: commit without a previous pose")
@@ -213,6 +222,7 @@ class Tracker:
         mot.speeds.append(segment_scale * float(np.linalg.norm(dT[:3, 3])) / steps)
         mot.T_last = T_cw
         self.gap = 0
+        self.ref_inliers = n_pnp
 
     def _scaled_relative(self, res: KltResult, has: NDArray[np.bool_], m: Landmarks,
                          T_last: F64) -> ScaledRelativeResult:
@@ -246,7 +256,7 @@ class Tracker:
         T_cw = rel.T_cur_prev @ T_last
         tr = self.tracks
         obs = Observations(tr.ids[rel.point_inliers].copy(), res.pts[rel.point_inliers].copy())
-        self._commit(img, res, res.ok & rel.track_inliers, T_cw, steps, segment_scale)
+        self._commit(img, res, res.ok & rel.track_inliers, T_cw, steps, segment_scale, None)
         n = int(rel.point_inliers.sum())
         return TrackStep(self._report(TrackOutcome.SCALED_RELATIVE, res, n, prior, pnp), T_cw,
                          obs)
@@ -304,7 +314,7 @@ class Tracker:
         self.prev_img = img
         self.motion.velocity = dT
         self.motion.T_last = T_cw
-        self.gap = 0
+        self.gap, self.ref_inliers = 0, None
         return TrackStep(self._report(TrackOutcome.ROTATION, res, 0, prior, pnp), T_cw, None)
 
     def _direct(self, img: U8, V: F64, m: Landmarks) -> F64 | None:
@@ -343,7 +353,7 @@ class Tracker:
         self.prev_img = img
         self.motion.velocity = V if self.gap == 0 else self.motion.velocity
         self.motion.T_last = T_cw
-        self.gap = 0
+        self.gap, self.ref_inliers = 0, None
         return TrackStep(self._report(TrackOutcome.DIRECT, res, 0, prior), T_cw, None)
 
 

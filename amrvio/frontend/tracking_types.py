@@ -37,6 +37,8 @@ class TrackOutcome(Enum):
     SKIPPED_BLURRED = "skipped_blurred"  # blurred before the map exists: not used
     TRACKED = "tracked"  # PnP pose; tracks committed
     TRACKED_BLURRED = "tracked_blurred"  # PnP pose on a blurred frame; tracks not committed
+    BLURRED_REFERENCE = "blurred_reference"  # PnP pose on a blurred frame that tracked as well as
+    # a sharp one: tracks committed, the image is the new reference (no keyframe: it is blurred)
     PREDICTED = "predicted"  # blurred and PnP failed: the motion-model pose
     DIRECT = "direct_fallback"  # pose from direct alignment; tracks re-seeded from the map
     ROTATION = "rotation_only"  # too few map points, but one rotation explains the flow

@@ -304,7 +304,7 @@ class Pipeline:
                                                                           outcome=TrackOutcome.LOST))
         if rep.outcome is TrackOutcome.DIRECT:
             return _Step(self._on_keyframe(step.T_cam_world, last_kf, None), step.T_cam_world, rep)
-        if rep.outcome is TrackOutcome.TRACKED_BLURRED:
+        if rep.outcome in (TrackOutcome.TRACKED_BLURRED, TrackOutcome.BLURRED_REFERENCE):
             return _Step(self._on_keyframe(step.T_cam_world, last_kf, step.observations),
                          step.T_cam_world, rep)
         reason = self.mapping.keyframe_due(index, rep.n_inliers, tracks)

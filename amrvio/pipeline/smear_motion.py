@@ -38,7 +38,8 @@ I64 = NDArray[np.int64]
 
 MAX_REL_SIGMA = 0.1
 MAX_SIGMA_M_S = 0.05
-ROUGH_POSES = (TrackOutcome.TRACKED_BLURRED, TrackOutcome.PREDICTED, TrackOutcome.DIRECT)
+ROUGH_POSES = (TrackOutcome.TRACKED_BLURRED, TrackOutcome.BLURRED_REFERENCE, TrackOutcome.PREDICTED,
+               TrackOutcome.DIRECT)
 """Tracking outcomes whose poses are too rough to difference into a velocity: those of blurred
 frames (PnP on blurred tracks, the motion model, direct alignment)."""
 
