@@ -186,8 +186,8 @@ HELP: dict[str, str] = {
     "tracking.rotation_only": "pose by rotation alone when PnP fails and one rotation explains the flow",
     "tracking.rotation_max_px": "median residual under which one rotation explains the flow (px)",
     "tracking.retry_unpredicted": "when PnP fails, track again without the motion prediction",
-    "tracking.blurred_reference_ratio": "blurred frames with this share of the last good one's PnP inliers are "
-                                       "tracked from (null: never)",
+    "tracking.blurred_reference_ratio": "VO without IMU: blurred frames with this share of the last good one's "
+                                       "PnP inliers are tracked from (null: never)",
     "tracking.scaled_relative": "when PnP fails: the tracks' essential matrix, its length from the map points",
     "tracking.scaled_relative.enabled": "try it before the direct-alignment fallback",
     "tracking.scaled_relative.min_tracks": "essential-matrix inliers needed",

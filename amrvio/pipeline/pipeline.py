@@ -70,7 +70,8 @@ class Pipeline:
         cfg = in_tracked_pixels(self.cfg, None if self.camera is None else self.camera.width)
         K = np.asarray(camera.pinhole().K if isinstance(camera, CameraModel) else camera,
                        dtype=np.float64)
-        tracking = cfg.tracking
+        vio_on = imu is not None and cfg.vio.enabled and cfg.track
+        tracking = cfg.tracking.with_imu_bridge() if vio_on else cfg.tracking
         self.tracker = Tracker(K, tracking, cfg.seed)
         self.initializer = Initializer(K, cfg.init, cfg.seed)
         self.mapping = LocalMapping(K, cfg.mapping)
@@ -79,8 +80,7 @@ class Pipeline:
         self.composer = TrajectoryComposer(K, RefineGates(
             cfg.output.final_refine, tracking.min_pnp_inliers, tracking.huber_px,
             tracking.pnp_thresh_px))
-        vio = VioStage(cfg.vio, K, imu, self.mapping) \
-            if imu is not None and cfg.vio.enabled and cfg.track else None
+        vio = VioStage(cfg.vio, K, imu, self.mapping) if vio_on and imu is not None else None
         self.sensors = SensorStages(diagnostics, vio)
         self.blur = BlurScorer(cfg.diagnostics.blur)
         self.records: list[FrameRecord] = []

@@ -112,9 +112,10 @@ class VioFrameInput:
     smear_px: float = float("nan")
 
 
-#: tracker outcomes whose tracks were not moved into the frame's image
+#: tracker outcomes whose tracks the stage does not take: not moved into the frame's image, or
+#: moved into a blurred one (BLURRED_REFERENCE; the stage bridges blurred frames with the IMU)
 UNTRACKED = (TrackOutcome.SKIPPED_BLURRED, TrackOutcome.PREDICTED, TrackOutcome.TRACKED_BLURRED,
-             TrackOutcome.REPEATED)
+             TrackOutcome.BLURRED_REFERENCE, TrackOutcome.REPEATED)
 
 
 def vio_input(t_ns: int, imu: ImuData | None, outcome: TrackOutcome, tracks: TrackSet,
