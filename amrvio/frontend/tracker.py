@@ -344,7 +344,9 @@ class Tracker:
 
     def _direct_fallback(self, img: U8, V: F64, m: Landmarks, res: KltResult,
                          prior: bool) -> TrackStep:
-        """Pose from direct alignment; re-seed the tracks by projecting the map points."""
+        """Pose from direct alignment; the map points' tracks are re-seeded by projecting them,
+        and the tracks without a point keep what KLT found for them (they would be the next
+        keyframe's new points: dropping them, the phone lost its map after 2-5 such frames)."""
         if self.motion.T_last is None:
             raise RuntimeError("Tracker: direct fallback without a previous pose")
         tr = self.tracks
@@ -355,8 +357,9 @@ class Tracker:
         h, w = img.shape
         inside = has & (z > 0) & (uv[:, 0] >= 8) & (uv[:, 0] < w - 8) & (uv[:, 1] >= 8) & \
             (uv[:, 1] < h - 8)
-        tr.move(np.where(inside[:, None], uv, tr.pts))
-        tr.keep(inside)
+        free = ~has & res.ok
+        tr.move(np.where(inside[:, None], uv, np.where(free[:, None], res.pts, tr.pts)))
+        tr.keep(inside | free)
         self.prev_img = img
         self.motion.velocity = V if self.gap == 0 else self.motion.velocity
         self.motion.T_last = T_cw
