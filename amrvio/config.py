@@ -304,6 +304,12 @@ KEY_BOUNDS: dict[str, tuple[float, float]] = {
     "scale.wheel.min_distance_m": (0.0, 100.0),
     "scale.wheel.max_turn_deg": (0.0, 180.0),
     "scale.wheel.half_window": (0, 10_000),
+    "tracking.blurred_reference_ratio": (0.0, 1000.0),
+    "tracking.scaled_relative.min_tracks": (8, 1_000_000),
+    "tracking.scaled_relative.min_points": (2, 1_000_000),
+    "tracking.scaled_relative.thresh_px": (1e-3, 1000.0),
+    "tracking.scaled_relative.point_thresh_px": (1e-3, 1000.0),
+    "tracking.scaled_relative.min_flow_px": (0.0, 10_000.0),
 }
 MAX_ABS_NUMBER = 1e9
 

@@ -80,6 +80,9 @@ def test_nested_override_keeps_the_other_defaults() -> None:
     ({"tracking": {"huber_px": "2"}}, "'tracking.huber_px' must be a number"),
     ({"tracking": 3}, "'tracking' must be a mapping"),
     ({"mapping": {"mapper": {"ba_backend": 1}}}, "'mapping.mapper.ba_backend' must be a string"),
+    ({"tracking": {"blurred_reference_ratio": -0.5}}, "'tracking.blurred_reference_ratio' must be in [0, 1000]"),
+    ({"tracking": {"scaled_relative": {"min_points": 1}}},
+     "'tracking.scaled_relative.min_points' must be in [2, 1000000]"),
 ])
 def test_bad_keys_and_types_name_the_key(data: dict, message: str) -> None:
     with pytest.raises(ConfigError) as err:
