@@ -99,19 +99,17 @@ class Tracker:
 
     def restart(self, img: U8, keep_tracks: bool) -> None:
         """Make ``img`` the new reference image (for a new initialisation attempt)."""
-        self.prev_img = img
+        self._new_reference(img)
         if not keep_tracks:
             self.tracks.clear()
         self.detect(img)
-        self.gap, self.ref_inliers = 0, None
         self.mapped = False
 
     def resume(self, img: U8, T_cam_world: F64) -> None:
         """Tracking resumes at ``img`` with pose ``T_cam_world`` (relocalised); the velocity of
         before the loss is kept as the motion prior."""
-        self.prev_img = img
+        self._new_reference(img)
         self.motion.T_last = T_cam_world.copy()
-        self.gap, self.ref_inliers = 0, None
         self.mapped = True
 
     def adopt_map_pose(self, T_cam_world: F64, velocity: F64) -> None:
@@ -143,10 +141,9 @@ class Tracker:
         if blurred:
             self.gap += 1
             return self._report(TrackOutcome.SKIPPED_BLURRED, res)
-        self.gap, self.ref_inliers = 0, None
         self.tracks.keep(res.ok)
         self.tracks.move(res.pts[res.ok])
-        self.prev_img = img
+        self._new_reference(img)
         return self._report(TrackOutcome.INIT_TRACKED, res)
 
     def track(self, img: U8, blurred: bool, m: Landmarks, segment_scale: float) -> TrackStep:
@@ -223,12 +220,18 @@ class Tracker:
             raise RuntimeError("Tracker: commit without a previous pose")
         tr.move(res.pts)
         tr.keep(keep)
-        self.prev_img = img
         dT = T_cw @ se3_matrix_inverse(mot.T_last)
         if steps == 1:
             mot.velocity = dT
         mot.speeds.append(segment_scale * float(np.linalg.norm(dT[:3, 3])) / steps)
         mot.T_last = T_cw
+        self._new_reference(img, n_pnp)
+
+    def _new_reference(self, img: U8, n_pnp: int | None = None) -> None:
+        """``img`` becomes the image the next frame is tracked from (no gap since); ``n_pnp``:
+        its PnP inliers (None: not posed by PnP), which a blurred frame must approach to take
+        its place."""
+        self.prev_img = img
         self.gap = 0
         self.ref_inliers = n_pnp
 
@@ -319,10 +322,9 @@ class Tracker:
         tr = self.tracks
         tr.move(res.pts)
         tr.keep(res.ok)
-        self.prev_img = img
         self.motion.velocity = dT
         self.motion.T_last = T_cw
-        self.gap, self.ref_inliers = 0, None
+        self._new_reference(img)
         return TrackStep(self._report(TrackOutcome.ROTATION, res, 0, prior, pnp), T_cw, None)
 
     def _direct(self, img: U8, V: F64, m: Landmarks) -> F64 | None:
@@ -361,10 +363,9 @@ class Tracker:
         free = ~has & res.ok
         tr.move(np.where(inside[:, None], uv, np.where(free[:, None], res.pts, tr.pts)))
         tr.keep(inside | free)
-        self.prev_img = img
         self.motion.velocity = V if self.gap == 0 else self.motion.velocity
         self.motion.T_last = T_cw
-        self.gap, self.ref_inliers = 0, None
+        self._new_reference(img)
         return TrackStep(self._report(TrackOutcome.DIRECT, res, 0, prior), T_cw, None)
 
 

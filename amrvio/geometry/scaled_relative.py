@@ -30,8 +30,8 @@ from scipy.optimize import least_squares
 from amrvio.errors import ShapeError
 from amrvio.geometry.checks import F64
 from amrvio.geometry.projection import normalized_to_bearings
-from amrvio.geometry.two_view import robust_rotation
-from amrvio.types.lie import so3_exp
+from amrvio.geometry.two_view import essential_ransac, robust_rotation
+from amrvio.types.lie import hat, so3_exp
 
 B = NDArray[np.bool_]
 
@@ -94,8 +94,7 @@ def _weighted_median(values: F64, weights: F64) -> float:
 
 def _sampson(R: F64, t: F64, x1: F64, x2: F64) -> F64:
     """(N,) signed Sampson distances (normalised units) of the pairs to E = [t]x R."""
-    tn = t / np.linalg.norm(t)
-    E = np.array([[0.0, -tn[2], tn[1]], [tn[2], 0.0, -tn[0]], [-tn[1], tn[0], 0.0]]) @ R
+    E = hat(t / np.linalg.norm(t)) @ R
     h1 = np.column_stack([x1, np.ones(len(x1))])
     h2 = np.column_stack([x2, np.ones(len(x2))])
     Ex1 = h1 @ E.T
@@ -105,10 +104,10 @@ def _sampson(R: F64, t: F64, x1: F64, x2: F64) -> F64:
     return np.asarray(num / np.maximum(den, 1e-15), dtype=np.float64)
 
 
-def _refine(R: F64, t: F64, x1: F64, x2: F64, P: F64, xp: F64, scale_px: float) -> tuple[F64, F64]:
+def _refine(R: F64, t: F64, x1: F64, x2: F64, P: F64, xp: F64, huber: float) -> tuple[F64, F64]:
     """Joint Huber least squares of the motion (R, metric t): the tracks' Sampson distances
     (which fix R and t's direction) and the agreeing points' reprojection errors (which also
-    fix its length), all in normalised units; ``scale_px`` is the Huber width."""
+    fix its length), all in normalised units, as is the Huber width ``huber``."""
 
     def resid(p: F64) -> F64:
         Rp = so3_exp(p[:3]) @ R
@@ -117,7 +116,7 @@ def _refine(R: F64, t: F64, x1: F64, x2: F64, P: F64, xp: F64, scale_px: float) 
         rp = (Q[:, :2] / Q[:, 2:3] - xp).ravel()
         return np.concatenate([_sampson(Rp, tp, x1, x2), rp])
 
-    sol = least_squares(resid, np.concatenate([np.zeros(3), t]), loss="huber", f_scale=scale_px,
+    sol = least_squares(resid, np.concatenate([np.zeros(3), t]), loss="huber", f_scale=huber,
                         method="trf", max_nfev=20, x_scale="jac")
     return so3_exp(sol.x[:3]) @ R, np.asarray(sol.x[3:], dtype=np.float64)
 
@@ -150,12 +149,11 @@ def scaled_relative_pose(x_prev: F64, x_cur: F64, has_point: B, points_prev: F64
     if flow < cfg.min_flow_px:
         return fail(ScaledRelativeStatus.LOW_PARALLAX, none, flow)
     cv2.setRNGSeed(cfg.seed)
-    E, mask = cv2.findEssentialMat(x1, x2, np.eye(3), method=cv2.RANSAC, prob=0.999,
-                                   threshold=cfg.thresh_px / focal_px)
-    if E is None or E.shape != (3, 3):
+    ess = essential_ransac(x1, x2, cfg.thresh_px, focal_px)
+    if ess is None:
         return fail(ScaledRelativeStatus.NO_ESSENTIAL, none, flow)
-    inl = mask.ravel().astype(bool)
-    _, R, t, pose_mask = cv2.recoverPose(np.asarray(E, np.float64), x1, x2, np.eye(3),
+    E, inl = ess
+    _, R, t, pose_mask = cv2.recoverPose(E, x1, x2, np.eye(3),
                                          mask=inl.astype(np.uint8).reshape(-1, 1))
     inl &= pose_mask.ravel() > 0
     if int(inl.sum()) < cfg.min_tracks:

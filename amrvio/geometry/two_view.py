@@ -210,10 +210,12 @@ def _check_motion(R: F64, t: F64, x1: F64, x2: F64, inl: B, cfg: TwoViewConfig,
     return _Candidate(T21, tri, good, int(good.sum()), int(consistent.sum()), int(support.sum()))
 
 
-def _essential_motions(x1: F64, x2: F64, cfg: TwoViewConfig, focal: float
-                       ) -> tuple[F64, B] | None:
+def essential_ransac(x1: F64, x2: F64, thresh_px: float, focal: float) -> tuple[F64, B] | None:
+    """The essential matrix of (N, 2) normalised pairs by OpenCV's five-point RANSAC (threshold
+    ``thresh_px`` at ``focal`` pixels) and its inlier mask; None when it finds none. Seed
+    OpenCV's RNG (``cv2.setRNGSeed``) first for a repeatable result."""
     E, mask = cv2.findEssentialMat(x1, x2, np.eye(3), method=cv2.RANSAC, prob=0.999,
-                                   threshold=cfg.ransac_thresh_px / focal)
+                                   threshold=thresh_px / focal)
     if E is None or E.shape != (3, 3):
         return None
     return np.asarray(E, dtype=np.float64), mask.ravel().astype(bool)
@@ -260,7 +262,7 @@ def two_view_init(
         return fail(status, rot_med, T21=T_rot, model=TwoViewModel.ROTATION, kth=rot_kth)
     inv_sigma2 = focal * focal  # one pixel of noise, in normalized units
     cv2.setRNGSeed(cfg.seed)
-    ess = _essential_motions(x1, x2, cfg, focal)
+    ess = essential_ransac(x1, x2, cfg.ransac_thresh_px, focal)
     H, _ = cv2.findHomography(x1, x2, cv2.RANSAC, 2.0 * cfg.ransac_thresh_px / focal)
     s_e, inl_e = _score_essential(ess[0], x1, x2, inv_sigma2) if ess else (0.0, empty)
     s_h, inl_h = (_score_homography(np.asarray(H, dtype=np.float64), x1, x2, inv_sigma2)
@@ -301,4 +303,4 @@ def two_view_init(
 
 
 __all__ = ["TwoViewConfig", "TwoViewModel", "TwoViewResult", "TwoViewStatus", "best_rotation",
-           "order_stat_desc", "robust_rotation", "two_view_init"]
+           "essential_ransac", "order_stat_desc", "robust_rotation", "two_view_init"]
