@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from amrvio.diagnostics.vo_motion import HISTORY, MotionHistory, motion_at_pose
+from amrvio.diagnostics.vo_motion import HISTORY, MAX_POINTS, MotionHistory, motion_at_pose
 from amrvio.types.camera import PinholeCamera
 
 CAM = PinholeCamera(640, 480, 500.0, 500.0, 319.5, 239.5)
@@ -99,3 +99,21 @@ def test_motion_at_pose_needs_points_in_view() -> None:
     assert motion_at_pose(T, behind, CAM, v, None) is None
     assert motion_at_pose(T, _points()[:5], CAM, v, None) is None
     assert motion_at_pose(T, _points(), CAM, np.array([np.nan, 0.0, 0.0]), None) is None
+
+
+def test_motion_at_pose_thins_the_points_in_view_not_all_points() -> None:
+    # a window's landmarks after a turn: most are behind the camera, a few hundred in view; the
+    # depths come from every point in view up to MAX_POINTS (thinning all points first kept
+    # about a third of those in view)
+    rng = np.random.default_rng(3)
+    n_view = MAX_POINTS - 20
+    seen = np.c_[rng.uniform(-2, 2, (n_view, 2)), rng.uniform(4, 12, n_view)]
+    behind = np.c_[rng.uniform(-2, 2, (2 * MAX_POINTS, 2)), -rng.uniform(1, 10, 2 * MAX_POINTS)]
+    pts = np.r_[behind[:MAX_POINTS], seen, behind[MAX_POINTS:]]
+    motion = motion_at_pose(np.eye(4), pts, CAM, np.array([0.0, 0.0, 1.0]), None)
+    assert motion is not None and motion.points_px is not None
+    assert len(motion.depths_m) == n_view
+    np.testing.assert_allclose(np.sort(motion.depths_m), np.sort(seen[:, 2]))
+    many = np.r_[behind, np.c_[rng.uniform(-2, 2, (3 * MAX_POINTS, 2)), rng.uniform(4, 12, 3 * MAX_POINTS)]]
+    thinned = motion_at_pose(np.eye(4), many, CAM, np.array([0.0, 0.0, 1.0]), None)
+    assert thinned is not None and len(thinned.depths_m) == MAX_POINTS
