@@ -227,6 +227,7 @@ HELP: dict[str, str] = {
     "vio.dynamic_init.max_window_s": "longest span of VO keyframes the dynamic initialisation uses (s)",
     "vio.min_tracks": "fewer tracks than this and the IMU bridges the frame",
     "vio.reinit_on_check_failure": "re-initialise the smoother when a consistency check fails",
+    "vio.reinit_after_s": "a scale or bias-drift check must fail this long before it re-initialises (s; 0: at once)",
     "vio.dynamic_init.max_scale_rel_std": "scale std / scale the dynamic initialisation must reach",
     "vio.dynamic_init.max_gravity_std_deg": "gravity-direction std the dynamic initialisation must reach (deg)",
     "vio.max_smear_px": "predicted smear (px, rotation + translation) above which the IMU bridges a frame",

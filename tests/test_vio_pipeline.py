@@ -14,6 +14,7 @@ import pytest
 
 from amrvio.app.run import RunResult, run
 from amrvio.config import PipelineConfig
+from amrvio.estimator.vio_checks import CheckName, CheckResult, CheckStatus, ConsistencyReport
 from amrvio.estimator.vio_types import EstimateKind
 from amrvio.frontend.tracking_types import TrackOutcome
 from amrvio.io.dataset import open_dataset
@@ -21,7 +22,7 @@ from amrvio.io.trajectory import read_trajectory
 from amrvio.pipeline.pipeline import Pipeline
 from amrvio.pipeline.records import PoseStatus
 from amrvio.pipeline.run_eval import yaw_alignment
-from amrvio.pipeline.vio_report import UNTRACKED, VIO_COLUMNS, ImuSetup, VioPhase
+from amrvio.pipeline.vio_report import UNTRACKED, VIO_COLUMNS, BodyTrack, ImuSetup, VioPhase
 from amrvio.sim.simulate import SimConfig, simulate
 from amrvio.types.lie import SE3
 from amrvio.types.sensors import ImuNoise
@@ -196,12 +197,12 @@ def test_a_rejected_update_gives_its_frame_the_state_the_smoother_restarts_from(
     assert body is not None
     for r in res.records:
         vio = r.estimator.vio
-        if vio is None or vio.checks is None or vio.checks.ok:
+        if vio is None or not any(e.startswith("vio_reinit:") for e in r.events) or vio.checks is None:
             continue
         # the failed checks re-initialise at the IMU prediction; the optimised state they rejected
         # (and the window it moved) must not become the frame's pose: the restart's state does,
         # refined by the restarted smoother within its prior (2 cm)
-        assert any(e.startswith("vio_reinit:") for e in r.events)
+        assert not vio.checks.ok
         assert vio.estimate is not None and vio.estimate.kind is EstimateKind.INITIAL
         assert vio.estimate.state is not None
         assert np.linalg.norm(body.T_world_body[r.index, :3, 3] - vio.estimate.state.T_world_body.t) < 0.06
@@ -255,14 +256,14 @@ def test_repeated_solver_failures_escalate_instead_of_looping(sim_dir: Path, tmp
 
 
 @pytest.mark.parametrize("failed,keeps", [("reprojection", False), ("state_jump", False), ("scale", True),
-                                          ("bias_drift", True)])
+                                          ("bias_drift", True), ("bias_magnitude", True)])
 def test_a_restart_after_a_failed_check_keeps_the_landmarks_unless_vision_is_the_suspect(
         sim_dir: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, failed: str, keeps: bool) -> None:
-    """One update whose ``failed`` check fails: a state jump or a reprojection failure restarts
+    """One update whose ``failed`` check fails (with ``reinit_after_s`` 0, so that a scale or
+    bias-drift failure restarts at once too): a state jump or a reprojection failure restarts
     the smoother without its landmarks (they pulled the state, and would pull the restart the same
     way); a scale or bias failure restarts with them (they hold the scale)."""
     from amrvio.estimator.vio_backend import VioBackend
-    from amrvio.estimator.vio_checks import CheckName, CheckResult, CheckStatus, ConsistencyReport
 
     calls = {"n": 0}
     real_add = VioBackend.add_frame
@@ -279,7 +280,32 @@ def test_a_restart_after_a_failed_check_keeps_the_landmarks_unless_vision_is_the
 
     monkeypatch.setattr(VioBackend, "add_frame", failing_add)
     seeds = _record_restart_landmarks(monkeypatch)
-    res = run(str(sim_dir), out=tmp_path / "out", report=False)
+    cfg = dataclasses.replace(PipelineConfig(), vio=dataclasses.replace(PipelineConfig().vio, reinit_after_s=0.0))
+    res = run(str(sim_dir), cfg, out=tmp_path / "out", report=False)
     assert [e for r in res.records for e in r.events if e.startswith("vio_reinit")] == [f"vio_reinit:{failed}"]
     assert available[14] > 0  # the smoother had landmarks before the failed update
     assert seeds == [available[14]] if keeps else seeds == [0]
+
+
+def _checks(t_s: float, *failed: str) -> ConsistencyReport:
+    res = [CheckResult(CheckName(f), CheckStatus.FAIL, 2.0, 1.0, "test") for f in failed]
+    res += [CheckResult(CheckName.REPROJECTION, CheckStatus.PASS, 0.5, 1.0, "test")] if not failed else []
+    return ConsistencyReport(int(round(t_s * 1e9)), tuple(res))
+
+
+def test_a_scale_or_bias_drift_failure_restarts_only_once_it_persists() -> None:
+    """The windowed checks (scale, bias drift) restart the smoother after failing on every
+    keyframe for ``after_s``; a passing keyframe in between starts the count again; the other
+    checks restart at once; ``after_s`` None never restarts."""
+    tr = BodyTrack()
+    due = [tr.restart_due(_checks(t, "scale"), 1.0) for t in (0.0, 0.5, 0.95)]
+    assert due == [False, False, False]
+    assert not tr.restart_due(_checks(1.0), 1.0)  # passed: the count restarts
+    due = [tr.restart_due(_checks(t, "bias_drift"), 1.0) for t in (1.1, 1.6, 2.1)]
+    assert due == [False, False, True]
+    assert not tr.restart_due(_checks(2.2, "scale"), 1.0)  # counted from 2.2 again
+    for acute in ("state_jump", "reprojection", "bias_magnitude"):
+        assert BodyTrack().restart_due(_checks(0.0, acute), 1.0)
+        assert BodyTrack().restart_due(_checks(0.0, "scale", acute), 1.0)
+    assert BodyTrack().restart_due(_checks(0.0, "scale"), 0.0)
+    assert not BodyTrack().restart_due(_checks(0.0, "state_jump"), None)

@@ -17,8 +17,10 @@ KLT tracks (ids and undistorted pixels) and the VO keyframe the frame became, if
    ``v = 0`` to its update, which stops the velocity drifting while the platform stands;
 4. a failed consistency check re-initialises the smoother at its own IMU prediction (logged as a
    ``vio_reinit`` event), with its landmarks unless the state jump or the reprojection check
-   failed, and so does a solver failure (with the old landmarks, then without); an IMU gap, or
-   ``MAX_SOLVER_FAILURES`` solver failures in a row, go back to step 2.
+   failed (a scale or bias-drift check only once it has kept failing for
+   ``VioStageConfig.reinit_after_s``, :meth:`BodyTrack.restart_due`), and so does a solver
+   failure (with the old landmarks, then without); an IMU gap, or ``MAX_SOLVER_FAILURES``
+   solver failures in a row, go back to step 2.
 
 :class:`BodyTrack` keeps each frame's body pose, updated while its state stays in the window.
 """
@@ -178,7 +180,8 @@ class VioStage:
             return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.track.init_kind)
         self.track.solver_failures = 0
         self.track.consistent = res.checks is None or res.checks.ok
-        if res.checks is not None and not res.checks.ok and self.cfg.reinit_on_check_failure:
+        if res.checks is not None and self.track.restart_due(
+                res.checks, self.cfg.reinit_after_s if self.cfg.reinit_on_check_failure else None):
             failed = [c.value for c in res.checks.failed]
             events.append(f"vio_reinit:{'+'.join(failed)}")
             base = res.predicted if res.predicted is not None else est.state
