@@ -146,15 +146,20 @@ class Tracker:
         self._new_reference(img)
         return self._report(TrackOutcome.INIT_TRACKED, res)
 
-    def track(self, img: U8, blurred: bool, m: Landmarks, segment_scale: float) -> TrackStep:
+    def track(self, img: U8, blurred: bool, m: Landmarks, segment_scale: float,
+              R_cur_ref: F64 | None = None) -> TrackStep:
         """Pose ``img`` against the map ``m`` (segment units; ``segment_scale`` global units per
-        segment unit, for the speed record)."""
+        segment unit, for the speed record). ``R_cur_ref``: the camera's rotation since the
+        reference image by the gyro, which replaces the motion model's in the KLT prediction."""
         T_last = self.motion.T_last
         if self.prev_img is None or T_last is None:
             raise RuntimeError("Tracker: track() without a previous frame")
         cfg, mot, tr = self.cfg, self.motion, self.tracks
         steps = self.gap + 1
         V = np.linalg.matrix_power(mot.velocity, steps)
+        if R_cur_ref is not None:
+            V = V.copy()
+            V[:3, :3] = R_cur_ref
         prior = False
         if self.gap > 0 and cfg.direct_prior:
             # resuming after blur: direct alignment to the last good image gives the prior

@@ -27,7 +27,7 @@ from amrvio.frontend.keyframe_policy import KeyframeReason
 from amrvio.frontend.tracker import Tracker
 from amrvio.frontend.tracking_types import Observations, TrackingReport, TrackOutcome
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
-from amrvio.pipeline.records import EstimatorReport, FrameRecord, PipelineOutput, PoseStatus
+from amrvio.pipeline.records import EstimatorReport, FrameRecord, PipelineOutput, PoseStatus, reference_time
 from amrvio.pipeline.recovery import MapRecovery, implausible_jump, link_to_previous
 from amrvio.pipeline.smear_motion import ROUGH_POSES, with_translation
 from amrvio.pipeline.vio_stage import ImuSetup, SensorStages, VioStage, vio_input
@@ -59,8 +59,8 @@ class Pipeline:
     diagnostics see the raw image), or a pinhole ``K`` (3x3) for undistorted images.
     ``diagnostics``: the FrameDiagnostics stage (None: off; see ``pipeline.diagnose``).
     The blur gate scores every image with ``diagnostics.blur.blur_score`` (BlurScorerConfig); with
-    VIO it also gates the frames the VIO bridges for their gyro-predicted smear (VioStage.smeared).
-    """
+    VIO it also gates the frames the VIO bridges for their gyro-predicted smear (VioStage.smeared),
+    and the gyro's rotation since the tracker's reference image predicts its KLT flow."""
 
     def __init__(self, camera: CameraModel | F64, config: PipelineConfig | None = None,
                  diagnostics: FrameDiagnostics | None = None, imu: ImuSetup | None = None,
@@ -68,8 +68,7 @@ class Pipeline:
         self.cfg = config or PipelineConfig()
         self.camera = camera if isinstance(camera, CameraModel) else None
         cfg = in_tracked_pixels(self.cfg, None if self.camera is None else self.camera.width)
-        K = np.asarray(camera.pinhole().K if isinstance(camera, CameraModel) else camera,
-                       dtype=np.float64)
+        K = np.asarray(camera.pinhole().K if isinstance(camera, CameraModel) else camera, dtype=np.float64)
         vio_on = imu is not None and cfg.vio.enabled and cfg.track
         tracking = cfg.tracking.with_imu_bridge() if vio_on else cfg.tracking
         self.tracker = Tracker(K, tracking, cfg.seed)
@@ -77,9 +76,8 @@ class Pipeline:
         self.mapping = LocalMapping(K, cfg.mapping)
         self.scale = make_scale_source(cfg.scale, cfg.seed, wheel)
         self.recovery = MapRecovery(K, cfg.recovery, cfg.seed)
-        self.composer = TrajectoryComposer(K, RefineGates(
-            cfg.output.final_refine, tracking.min_pnp_inliers, tracking.huber_px,
-            tracking.pnp_thresh_px))
+        self.composer = TrajectoryComposer(K, RefineGates(cfg.output.final_refine, tracking.min_pnp_inliers,
+                                                          tracking.huber_px, tracking.pnp_thresh_px))
         vio = VioStage(cfg.vio, K, imu, self.mapping) if vio_on and imu is not None else None
         self.sensors = SensorStages(diagnostics, vio)
         self.blur = BlurScorer(cfg.diagnostics.blur)
@@ -139,7 +137,9 @@ class Pipeline:
         elif not self.tracker.mapped:
             step = self._init_step(index, image, blurred, events)
         else:
-            step = self._track_step(index, image, blurred, events)
+            R = None if self.sensors.vio is None else self.sensors.vio.camera_rotation(
+                reference_time(self.records, self.tracker.gap), t_ns, imu)
+            step = self._track_step(index, image, blurred, events, R)
         return self._emit(index, t_ns, blur, health, step, events, imu)
 
     def _emit(self, index: int, t_ns: int, blur: BlurResult, health: FrameHealth | None,
@@ -273,7 +273,7 @@ class Pipeline:
                      res, kf, reading)
 
     # ------------------------------------------------------------------ with a map
-    def _track_step(self, index: int, img: U8, blurred: bool, events: list[str]) -> _Step:
+    def _track_step(self, index: int, img: U8, blurred: bool, events: list[str], R_cur_ref: F64 | None) -> _Step:
         seg = self.mapping.current
         tracks = self.tracker.tracks
         if not blurred and self.tracker.gap >= self.cfg.recovery.max_bridge_frames:
@@ -283,7 +283,7 @@ class Pipeline:
             self.recovery.give_up()
             if reloc is not None:
                 return reloc
-        step = self.tracker.track(img, blurred, seg.mapper.map, seg.world_from_segment.s)
+        step = self.tracker.track(img, blurred, seg.mapper.map, seg.world_from_segment.s, R_cur_ref)
         rep = step.report
         if rep.direct_prior:
             events.append("direct_prior")
@@ -387,8 +387,7 @@ class Pipeline:
         vio, statuses = self.sensors.vio, list(composed.statuses)
         body, statuses = vio.finish(composed.T_world_cam, statuses, self.mapping.segments) if vio else (None, statuses)
         records = tuple(
-            dataclasses.replace(r, status=statuses[i],
-                                pose_refined=to_se3(composed.T_world_cam[i]),
+            dataclasses.replace(r, status=statuses[i], pose_refined=to_se3(composed.T_world_cam[i]),
                                 segment=self.composer.anchors[i].segment, scale_factor=float(fs[i]))
             for i, r in enumerate(self.records))
         kf_idx = np.array([i for i, r in enumerate(records) if r.is_keyframe], dtype=np.int64)

@@ -127,6 +127,15 @@ class VioStage:
         self.imu.add(imu)
         return imu
 
+    def camera_rotation(self, t0_ns: int, t1_ns: int, imu: ImuData | None) -> F64 | None:
+        """``R_cam1_cam0``, the camera's rotation from ``t0_ns`` to ``t1_ns`` by the gyro less the
+        running estimate's bias (``imu``: the frame's samples), for the tracker's KLT prediction;
+        None when the log does not cover the interval."""
+        self.frame_imu(t1_ns, imu)
+        states = self.backend.window() if self.running else ()
+        bias = np.asarray(states[-1][0].bias.gyro_rad_s) if states else None
+        return self.imu.rotation(t0_ns, t1_ns, self.setup.T_body_cam.R.T, bias)
+
     def smeared(self, health: FrameHealth | None, events: list[str]) -> bool:
         """Whether the gyro-predicted smear of a frame, known before tracking, is above
         ``max_smear_px`` (logged as ``smear_gated``): the stage bridges such a frame, and the

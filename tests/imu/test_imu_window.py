@@ -38,3 +38,21 @@ def test_first_frame_looks_back_two_seconds() -> None:
 def test_window_before_the_stream_is_empty() -> None:
     win = frame_imu_window(_imu(), T0 - 3_000_000_000, None, 0.01)
     assert len(win) == 0
+
+
+def test_imu_log_rotation_is_the_gyro_integral_in_the_camera_frame() -> None:
+    # a constant 0.8 rad/s about the body z axis for 0.25 s, camera x = body z: the camera turns
+    # 0.2 rad about its x axis; R_cam1_cam0 is the transpose of exp(0.2 [x]^)
+    from amrvio.pipeline.imu_log import ImuLog
+    from amrvio.types.lie import so3_exp
+    from amrvio.types.sensors import ImuData
+
+    t = np.arange(0, 1_000_000_001, 5_000_000, dtype=np.int64)
+    gyro = np.tile([0.0, 0.0, 0.8], (t.size, 1)) + [0.01, -0.02, 0.03]
+    log = ImuLog(keep_s=5.0)
+    log.add(ImuData(t, gyro, np.zeros((t.size, 3))))
+    R_cam_body = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    R = log.rotation(300_000_000, 550_000_000, R_cam_body, np.array([0.01, -0.02, 0.03]))
+    assert R is not None
+    np.testing.assert_allclose(R, so3_exp(np.array([0.2, 0.0, 0.0])).T, atol=1e-12)
+    assert log.rotation(300_000_000, 1_500_000_000, R_cam_body, None) is None  # beyond the log
