@@ -83,9 +83,12 @@ def _accuracy_rows(tag: str, res: RunResult, secs: float, ate_max: float, scale_
 #: render seeds of the replay protocol (the room's texture and the sensor noise; the flight and
 #: its IMU are the recording's) and simulator seeds of the forward-stop-turn protocol; the first
 #: of each is the headline run. One run is not a result: on the replay, seed 0 passed the scale
-#: target (0.76 %) while seeds 1-3 gave 1.95-3.02 %.
+#: target (0.76 %) while seeds 1-3 gave 1.95-3.02 %. The forward-stop-turn runs 10 seeds (8 s
+#: each): whether a seed crosses 2 % before or after 3 s turns on excursions of 1.5-3.5 % that small
+#: front-end changes move (the gyro-predicted KLT moved seed 0 from 0.825 s to 3.475 s and seed 6
+#: from 3.375 s to 0.825 s); 4 seeds could not tell such a change from noise.
 REPLAY_SEEDS = (0, 1, 2, 3)
-FST_SEEDS = (0, 1, 2, 3)
+FST_SEEDS = tuple(range(10))
 #: seeds of the IMU synthesised for the real MH_01 images (its noise and bias walk)
 MH01_SEEDS = (0, 1, 2, 3)
 
@@ -194,7 +197,8 @@ def forward_stop_turn(work: Path) -> list[Row]:
          "note": note, "target": "100 %", "pass": posed == n},
         {"name": f"VIO sim forward-stop-turn 8 s, protocol over {len(FST_SEEDS)} seeds: median time to 2 % scale",
          "value": float(np.median(times)), "unit": "s", "target": "<= 3 s", "pass": bool(np.median(times) <= 3.0),
-         "note": f"seeds {list(FST_SEEDS)}: {[round(t, 3) for t in times]} s"},
+         "note": f"seeds {list(FST_SEEDS)}: {[round(t, 3) for t in times]} s; "
+                 f"{sum(t <= 3.0 for t in times)} of {len(times)} within 3 s"},
     ]
 
 
@@ -230,9 +234,13 @@ def _burst_pair(work: Path, seed: int, bursts: str) -> tuple[float, float, int, 
 
 def blur_bursts(work: Path) -> list[Row]:
     rows: list[Row] = []
+    growths: list[float] = []
+    all_posed = True
     for k, (seed, bursts) in enumerate(BURST_CASES):
         a_blur, a_sharp, posed, n, bridged, blurred = _burst_pair(work, seed, bursts)
         growth = 100.0 * (a_blur / a_sharp - 1.0)
+        growths.append(growth)
+        all_posed = all_posed and posed == n
         note = (f"seed {seed}, bursts {bursts} (t0:s:rad/s); ATE {a_blur:.4f} m with blur, {a_sharp:.4f} m "
                 f"without; {posed}/{n} posed, {blurred} frames gated as blurred, {bridged} bridged by the IMU")
         if k == 0:
@@ -247,6 +255,12 @@ def blur_bursts(work: Path) -> list[Row]:
             rows.append({"name": f"VIO blur burst protocol, seed {seed}: ATE growth over the run without blur",
                          "value": growth, "unit": "%",
                          "note": f"{note}; every frame posed and growth <= 20 %: {'yes' if ok else 'no'}"})
+    med = float(np.median(growths))
+    seeds = [seed for seed, _ in BURST_CASES]
+    rows.append({"name": f"VIO blur burst protocol over {len(seeds)} seeds: median ATE growth without blur",
+                 "value": med, "unit": "%", "target": "<= 20 %", "pass": bool(all_posed and med <= 20.0),
+                 "note": f"seeds {seeds}: {[round(g, 1) for g in growths]} %; {sum(g <= 20.0 for g in growths)} of "
+                         f"{len(growths)} within 20 %; every frame posed: {'yes' if all_posed else 'no'}"})
     return rows
 
 
