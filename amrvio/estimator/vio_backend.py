@@ -324,17 +324,37 @@ class VioBackend:
 
     def _gate(self, obs: VisualObservations, T_wc_pred: SE3) -> tuple[list[tuple[int, F64]], int]:
         """The (landmark key, uv) of observations of active landmarks within the gate of their
-        prediction, and how many were gated out."""
-        active = self._tracks.active
-        rows = [(i, active[lm_id].key) for i, lm_id in enumerate(obs.ids.tolist()) if lm_id in active]
+        prediction and within ``max_log_scale`` of their distance from their first keyframe, and
+        how many were gated out."""
+        vis, active = self.cfg.visual, self._tracks.active
+        rows = [(i, active[lm_id]) for i, lm_id in enumerate(obs.ids.tolist()) if lm_id in active]
         if not rows:
             return [], 0
-        Xw = np.array([self._landmark(key) for _, key in rows])
+        Xw = np.array([self._landmark(lm.key) for _, lm in rows])
         uv_obs = obs.uv_px[[i for i, _ in rows]]
         uv_pred, z = project_px(self._cam.K, T_wc_pred, Xw)
         err = np.linalg.norm(uv_pred - uv_obs, axis=1)
-        ok = (z > self.cfg.visual.min_depth_m) & (err <= self.cfg.visual.gate_px)
-        return [(rows[j][1], uv_obs[j]) for j in np.flatnonzero(ok).tolist()], int(np.count_nonzero(~ok))
+        ok = (z > vis.min_depth_m) & (err <= vis.gate_px)
+        if vis.max_log_scale > 0:
+            # the track outlived its landmark: the front-end id starts a new one (pending, then
+            # triangulated again from the views that follow); the old one keeps its views
+            first = np.array([lm.first_keyframe for _, lm in rows])
+            beyond = ok & ~self._range_ratio_within(Xw, first, T_wc_pred.t, vis.max_log_scale)
+            self._tracks.retire([int(obs.ids[rows[j][0]]) for j in np.flatnonzero(beyond).tolist()])
+            ok &= ~beyond
+        return [(rows[j][1].key, uv_obs[j]) for j in np.flatnonzero(ok).tolist()], int(np.count_nonzero(~ok))
+
+    def _range_ratio_within(self, Xw: F64, first: NDArray[np.int64], c_now: F64, limit: float) -> NDArray[np.bool_]:
+        """Whether each landmark's distance from the camera centre ``c_now`` is within ``limit``
+        (natural log of the ratio) of its distance from its first keyframe's (frame index
+        ``first``): the scale change of its image patch, which a rotation does not change."""
+        r0 = np.zeros(len(first))
+        for f in np.unique(first).tolist():
+            sel = first == f
+            r0[sel] = np.linalg.norm(Xw[sel] - self._kf_camera(int(f)).t, axis=1)
+        r1 = np.linalg.norm(Xw - c_now, axis=1)
+        ok = (r0 > 0) & (r1 > 0)
+        return ok & (np.abs(np.log(np.where(ok, r0, 1.0) / np.where(ok, r1, 1.0))) <= limit)
 
     def _is_keyframe(self, seen: list[tuple[int, F64]], T_wc_pred: SE3, last_kf: WindowFrame) -> bool:
         vis = self.cfg.visual

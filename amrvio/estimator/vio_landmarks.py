@@ -105,6 +105,12 @@ class LandmarkTracks:
         self.active[lm_id] = Landmark(key, kf)
         return key
 
+    def retire(self, lm_ids: list[int]) -> None:
+        """End the landmarks of these front-end ids: their tracks go on as new pending tracks
+        (the smoother keeps the old landmarks with the views they had)."""
+        for lm_id in lm_ids:
+            self.active.pop(lm_id, None)
+
     def forget_before(self, first_kf: int) -> None:
         """Drop what refers only to keyframes older than ``first_kf`` (they left the window)."""
         for lm_id in [i for i, lm in self.active.items() if lm.first_keyframe < first_kf]:

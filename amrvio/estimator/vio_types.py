@@ -62,6 +62,15 @@ class VisualConfig:
     forward-stop-turn drive: median 0.1 px after 1 frame, 0.4 px after 4-8, 0.56 px after
     16-32, and 20-32 % of the observations of tracks older than 3 frames more than 1 px off),
     and independent 1 px noise on every observation over-weights old tracks.
+    max_log_scale: when a landmark's distance from the camera differs from its distance from
+    its first keyframe by more than this (natural log of the ratio; 0.2 = 22 %), the observation
+    is not used and the landmark ends: its track goes on as a new pending track, triangulated
+    again from the views that follow (0: no limit). The KLT follows a patch with a
+    translation-only model, so a track slides over the surface as its patch grows or shrinks:
+    against the simulator's truth on forward-stop-turn its median error was 0.09 px below 2 %
+    of scale change, 0.34 px at 5-10 %, 0.89 px at 10-20 % and 1.95 px at 20-50 %, and those
+    tracks held the smoother's speed 7 % low through the braking (true projections with 0.3 px
+    of white noise: within 2 %). ORB-SLAM's map points have a distance range for the same reason.
     """
 
     pixel_sigma_px: float = 1.0
@@ -74,6 +83,7 @@ class VisualConfig:
     min_tracked_landmarks: int = 30
     landmark_prior_range: float = 3.0
     track_age_sigma_frames: float = 10.0
+    max_log_scale: float = 0.2
 
     def __post_init__(self) -> None:
         _positive("vio.visual", self, ("pixel_sigma_px", "huber_px", "gate_px", "min_depth_m", "max_depth_m"))
@@ -85,6 +95,8 @@ class VisualConfig:
             raise ConfigError("vio.visual.max_depth_m must be larger than vio.visual.min_depth_m")
         if not (np.isfinite(self.landmark_prior_range) and self.landmark_prior_range >= 0):
             raise ConfigError(f"vio.visual.landmark_prior_range must be a number >= 0, got {self.landmark_prior_range}")
+        if not (np.isfinite(self.max_log_scale) and self.max_log_scale >= 0):
+            raise ConfigError(f"vio.visual.max_log_scale must be a number >= 0, got {self.max_log_scale}")
         if not (np.isfinite(self.track_age_sigma_frames) and self.track_age_sigma_frames >= 0):
             raise ConfigError(f"vio.visual.track_age_sigma_frames must be a number >= 0, got "
                               f"{self.track_age_sigma_frames}")
