@@ -325,7 +325,8 @@ class VioBackend:
     def _gate(self, obs: VisualObservations, T_wc_pred: SE3) -> tuple[list[tuple[int, F64]], int]:
         """The (landmark key, uv) of observations of active landmarks within the gate of their
         prediction and within ``max_log_scale`` of their distance from their first keyframe, and
-        how many were gated out."""
+        how many were gated out. A landmark beyond that distance ratio ends here
+        (``LandmarkTracks.retire``)."""
         vis, active = self.cfg.visual, self._tracks.active
         rows = [(i, active[lm_id]) for i, lm_id in enumerate(obs.ids.tolist()) if lm_id in active]
         if not rows:
