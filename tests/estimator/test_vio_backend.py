@@ -84,10 +84,10 @@ def test_the_reported_sigma_covers_the_error(handheld: tuple[Scenario, RunLog],
 
 
 def test_forward_stop_turn_keeps_its_keyframes_while_standing(forward_stop_turn: tuple[Scenario, RunLog]) -> None:
-    """Measured: RMS error 0.7 cm (the path is a straight line, so no SE3 alignment), largest 1.5 cm;
-    37 of 120 frames become keyframes, one while at rest: in the turn, when the landmarks in view
-    fell to 27 (tracks that ended their landmarks at ``max_log_scale`` are not yet landmarks
-    again); without that limit, 1.0 cm, 3.0 cm and none at rest."""
+    """Measured: RMS error 0.67 cm (the path is a straight line, so no SE3 alignment), largest
+    1.5 cm; 37 of 120 frames become keyframes, one while at rest: in the turn, when the landmarks
+    in view fell to 27 (tracks that ended their landmarks at ``max_log_scale`` are not yet
+    landmarks again); without that limit, 0.69 cm, 1.4 cm, 37 keyframes and none at rest."""
     sc, log = forward_stop_turn
     assert np.sqrt(np.mean(log.position_errors_m() ** 2)) < 0.02
     assert log.position_errors_m().max() < 0.06
