@@ -235,10 +235,7 @@ class VioBackend:
             frame.slots = [slots[p] for p in positions]
         self._window = [f for f in self._window if f.ordinal >= ordinal - (self.cfg.window_keyframes - 1)
                         and (f.keyframe or f is not prev)] + [frame]
-        vals = self._values
-        state = InertialState(t_ns, from_gtsam_pose(vals.atPose3(X)),
-                              np.asarray(vals.atVector(V)),
-                              from_gtsam_bias(vals.atConstantBias(B)))
+        state = self._smoothed(k, t_ns)
         self._last = (state, cov)
         self._pre.reset(t_ns, state.bias)
         self._buffer.forget_before(t_ns)
@@ -260,14 +257,22 @@ class VioBackend:
         a keyframe (a state keeps improving after its own frame's update)."""
         if self._values is None:
             return ()
-        vals, out = self._values, []
-        for f in self._window:
-            X, V, B = state_keys(f.index)
-            st = InertialState(f.t_ns, from_gtsam_pose(vals.atPose3(X)),
-                               np.asarray(vals.atVector(V)),
-                               from_gtsam_bias(vals.atConstantBias(B)))
-            out.append((st, f.keyframe))
-        return tuple(out)
+        return tuple((self._smoothed(f.index, f.t_ns), f.keyframe) for f in self._window)
+
+    def newest(self) -> InertialState | None:
+        """The smoothed state of the window's newest frame (``window()[-1]``, without reading the
+        others); None before the first initialisation."""
+        if self._values is None or not self._window:
+            return None
+        f = self._window[-1]
+        return self._smoothed(f.index, f.t_ns)
+
+    def _smoothed(self, k: int, t_ns: int) -> InertialState:
+        """The current estimate of frame ``k``'s state (its pose, velocity and biases)."""
+        vals = self._estimate()
+        X, V, B = state_keys(k)
+        return InertialState(t_ns, from_gtsam_pose(vals.atPose3(X)), np.asarray(vals.atVector(V)),
+                             from_gtsam_bias(vals.atConstantBias(B)))
 
     def landmarks(self) -> tuple[NDArray[np.int64], F64]:
         """The front-end ids (L,) and current world positions (L, 3) of the window's landmarks

@@ -113,6 +113,7 @@ class PipelineOutput:
     def stamps_ns(self) -> NDArray[np.int64]:
         return np.array([r.t_ns for r in self.records], dtype=np.int64)
 
+
 def reference_time(records: list[FrameRecord], gap: int) -> int:
     """The time of the image the tracker tracks from, when the newest of ``records`` is ``gap``
     frames after it: a repeated frame (a recorder's duplicate) shows the image it repeats."""
@@ -122,4 +123,4 @@ def reference_time(records: list[FrameRecord], gap: int) -> int:
     return records[max(k, 0)].t_ns
 
 
-__all__ = ["reference_time", "BodyTrajectory", "EstimatorReport", "FrameRecord", "PipelineOutput", "PoseStatus"]
+__all__ = ["BodyTrajectory", "EstimatorReport", "FrameRecord", "PipelineOutput", "PoseStatus", "reference_time"]

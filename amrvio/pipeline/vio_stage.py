@@ -132,8 +132,8 @@ class VioStage:
         running estimate's bias (``imu``: the frame's samples), for the tracker's KLT prediction;
         None when the log does not cover the interval."""
         self.frame_imu(t1_ns, imu)
-        states = self.backend.window() if self.running else ()
-        bias = np.asarray(states[-1][0].bias.gyro_rad_s) if states else None
+        newest = self.backend.newest() if self.running else None
+        bias = None if newest is None else np.asarray(newest.bias.gyro_rad_s)
         return self.imu.rotation(t0_ns, t1_ns, self.setup.T_body_cam.R.T, bias)
 
     def smeared(self, health: FrameHealth | None, events: list[str]) -> bool:
