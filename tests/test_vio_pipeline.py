@@ -14,13 +14,14 @@ import pytest
 
 from amrvio.app.run import RunResult, run
 from amrvio.config import PipelineConfig
+from amrvio.diagnostics.blur import BlurResult
 from amrvio.estimator.vio_checks import CheckName, CheckResult, CheckStatus, ConsistencyReport
 from amrvio.estimator.vio_types import EstimateKind
 from amrvio.frontend.tracking_types import TrackOutcome
 from amrvio.io.dataset import open_dataset
 from amrvio.io.trajectory import read_trajectory
 from amrvio.pipeline.pipeline import Pipeline
-from amrvio.pipeline.records import PoseStatus
+from amrvio.pipeline.records import EstimatorReport, FrameRecord, PoseStatus, reference_time
 from amrvio.pipeline.run_eval import yaw_alignment
 from amrvio.pipeline.vio_report import UNTRACKED, VIO_COLUMNS, BodyTrack, ImuSetup, VioPhase
 from amrvio.sim.simulate import SimConfig, simulate
@@ -312,9 +313,6 @@ def test_a_scale_or_bias_drift_failure_restarts_only_once_it_persists() -> None:
 
 
 def test_the_tracker_reference_time_skips_the_frames_it_did_not_track_and_the_repeats() -> None:
-    from amrvio.diagnostics.blur import BlurResult
-    from amrvio.pipeline.records import EstimatorReport, FrameRecord, reference_time
-
     def rec(i: int, *events: str) -> FrameRecord:
         return FrameRecord(i, 1000 * i, PoseStatus.TRACKED, None, None, None, 1.0, events,
                            BlurResult(1.0, float("nan"), float("nan"), False), None, None, EstimatorReport())

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from amrvio.imu.window import FIRST_FRAME_LOOKBACK_NS, MARGIN_NS, frame_imu_window
+from amrvio.pipeline.imu_log import ImuLog
+from amrvio.types.lie import so3_exp
 from amrvio.types.sensors import ImuData
 
 DT = 5_000_000  # 200 Hz
@@ -43,10 +45,6 @@ def test_window_before_the_stream_is_empty() -> None:
 def test_imu_log_rotation_is_the_gyro_integral_in_the_camera_frame() -> None:
     # a constant 0.8 rad/s about the body z axis for 0.25 s, camera x = body z: the camera turns
     # 0.2 rad about its x axis; R_cam1_cam0 is the transpose of exp(0.2 [x]^)
-    from amrvio.pipeline.imu_log import ImuLog
-    from amrvio.types.lie import so3_exp
-    from amrvio.types.sensors import ImuData
-
     t = np.arange(0, 1_000_000_001, 5_000_000, dtype=np.int64)
     gyro = np.tile([0.0, 0.0, 0.8], (t.size, 1)) + [0.01, -0.02, 0.03]
     log = ImuLog(keep_s=5.0)
