@@ -68,6 +68,19 @@ class ComposedTrajectory:
     T_world_cam: F64
     statuses: tuple[PoseStatus, ...]
 
+    def scaled(self, frame_scale: F64) -> ComposedTrajectory:
+        """The metric trajectory: each position increment scaled by the (N,) per-frame scale
+        (the mean of its two frames'; smoothed per keyframe by the scale source)."""
+        T_wc = self.T_world_cam.copy()
+        p = T_wc[:, :3, 3].copy()
+        q = p.copy()
+        if len(p):
+            q[0] = p[0] * frame_scale[0]
+        for i in range(1, len(p)):
+            q[i] = q[i - 1] + 0.5 * (frame_scale[i] + frame_scale[i - 1]) * (p[i] - p[i - 1])
+        T_wc[:, :3, 3] = q
+        return ComposedTrajectory(T_wc, self.statuses)
+
 
 def to_se3(T: F64) -> SE3:
     """A 4x4 pose as an SE3 value, bit-exact (no re-orthonormalisation)."""
@@ -144,15 +157,8 @@ class TrajectoryComposer:
         tracked = np.flatnonzero([s is PoseStatus.TRACKED for s in statuses])
         if len(tracked):
             T_wc = _fill_interpolated(T_wc, statuses, tracked)
-        if frame_scale is not None:
-            # metric scale: scale each position increment (smoothed per keyframe)
-            p = T_wc[:, :3, 3].copy()
-            q = p.copy()
-            q[0] = p[0] * frame_scale[0]
-            for i in range(1, n):
-                q[i] = q[i - 1] + 0.5 * (frame_scale[i] + frame_scale[i - 1]) * (p[i] - p[i - 1])
-            T_wc[:, :3, 3] = q
-        return ComposedTrajectory(T_wc, tuple(statuses))
+        composed = ComposedTrajectory(T_wc, tuple(statuses))
+        return composed if frame_scale is None else composed.scaled(frame_scale)
 
 
     def _resolve_frames(self, T_wc: F64) -> list[PoseStatus]:

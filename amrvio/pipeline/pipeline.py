@@ -380,12 +380,13 @@ class Pipeline:
                                   self.all_timings())
         stamps = np.array([r.t_ns for r in self.records], dtype=np.int64)
         frame_scale = self.scale.frame_scales(n, stamps) if self.scale.active else None
-        composed = self.composer.finish(self.mapping.segments, frame_scale)
+        unscaled = self.composer.finish(self.mapping.segments, None)  # the VIO's initialisation placed these
+        composed = unscaled if frame_scale is None else unscaled.scaled(frame_scale)
         fs = frame_scale if frame_scale is not None else np.ones(n)
         g_scale = float(np.median(fs)) if n else 1.0
         pts = [sg.points_in_world(g_scale) for sg in self.mapping.segments]
         vio, statuses = self.sensors.vio, list(composed.statuses)
-        body, statuses = vio.finish(composed.T_world_cam, statuses, self.mapping.segments) if vio else (None, statuses)
+        body, statuses = vio.finish(unscaled.T_world_cam, statuses, self.mapping.segments) if vio else (None, statuses)
         records = tuple(
             dataclasses.replace(r, status=statuses[i], pose_refined=to_se3(composed.T_world_cam[i]),
                                 segment=self.composer.anchors[i].segment, scale_factor=float(fs[i]))

@@ -21,7 +21,7 @@ from amrvio.frontend.tracks import TrackSet
 from amrvio.imu.propagation import InertialState
 from amrvio.imu.static_init import StaticInitResult
 from amrvio.pipeline.zero_velocity import ZeroVelocity, ZeroVelocityConfig
-from amrvio.types.lie import SE3
+from amrvio.types.lie import SE3, se3_matrix_inverse
 from amrvio.types.sensors import ImuData, ImuNoise, WheelData
 
 F64 = NDArray[np.float64]
@@ -178,6 +178,7 @@ class BodyTrack:
     poses: dict[int, F64] = field(default_factory=dict)
     index_of: dict[int, int] = field(default_factory=dict)
     bridged: set[int] = field(default_factory=set)
+    anchored: dict[int, list[tuple[int, F64]]] = field(default_factory=dict)  # keyframe -> (frame, T_kf_frame)
     consistent: bool = False  # the newest smoothed pose passed the consistency checks
     solver_failures: int = 0  # consecutive updates the solver failed
     drift_failing_since_ns: int | None = None  # the scale or bias checks fail from then on
@@ -210,12 +211,39 @@ class BodyTrack:
         self.drift_failing_since_ns = None
         return True
 
-    def update(self, states: tuple[tuple[InertialState, bool], ...]) -> None:
-        """The smoother's newer estimates of frames still in its window."""
-        for st, _ in states:
+    def update(self, states: tuple[tuple[InertialState, bool], ...], newest: int | None = None) -> None:
+        """The smoother's newer estimates of the frames still in its window (``states``, oldest
+        first, each with whether it is a keyframe), and of the frames that left it with a
+        keyframe still in it as their anchor.
+
+        A frame that is not a keyframe (``newest``: the frame just given, or bridged) has no state
+        after the next update; its pose is then kept relative to the newest keyframe of the window,
+        and moves with that keyframe's later estimates. Held in the world instead, it kept the
+        window's position and yaw of its own time, which later updates move (they are not
+        observable): on forward-stop-turn, the poses of non-keyframes were 4-5 cm from those of
+        their neighbouring keyframes in the final trajectory."""
+        in_window: set[int] = set()
+        keyframe: int | None = None
+        newest_is_kf = False
+        for st, is_kf in states:
             i = self.index_of.get(st.t_ns)
             if i is not None:
                 self.poses[i] = st.T_world_body.matrix()
+                in_window.add(i)
+                if i == newest:
+                    newest_is_kf = is_kf
+                elif is_kf:
+                    keyframe = i
+        if newest is not None and keyframe is not None and not newest_is_kf:
+            rel = se3_matrix_inverse(self.poses[keyframe]) @ self.poses[newest]
+            self.anchored.setdefault(keyframe, []).append((newest, rel))
+        for kf in list(self.anchored):
+            if kf not in in_window:  # marginalised: its frames' poses are final
+                del self.anchored[kf]
+                continue
+            for j, rel in self.anchored[kf]:
+                if j not in in_window:
+                    self.poses[j] = self.poses[kf] @ rel
 
 
 class VioPhase(Enum):

@@ -160,6 +160,7 @@ class VioStage:
             if not est.ok or est.state is None:
                 return VioReport(VioPhase.NO_IMU, est, last_init=self.last_init, init_kind=self.track.init_kind)
             self.track.set(index, inp.t_ns, est.state.T_world_body, bridged=True)
+            self.track.update(self.backend.window(), index)
             events.append("vio_bridged")
             return VioReport(VioPhase.BRIDGED, est, last_init=self.last_init, init_kind=self.track.init_kind)
         landmarks = self.backend.landmarks()
@@ -207,7 +208,7 @@ class VioStage:
             return VioReport(VioPhase.VIO, restart, res.keyframe, last_init=self.last_init, checks=res.checks,
                              init_kind=self.track.init_kind, zero_velocity=zv)
         self.track.set(index, inp.t_ns, est.state.T_world_body)
-        self.track.update(self.backend.window())
+        self.track.update(self.backend.window(), index)
         return VioReport(VioPhase.VIO, est, res.keyframe, last_init=self.last_init, checks=res.checks,
                          init_kind=self.track.init_kind, zero_velocity=zv)
 
