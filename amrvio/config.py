@@ -281,6 +281,9 @@ HELP: dict[str, str] = {
     "scale.wheel.min_distance_m": "wheel distance between keyframes below which a pair gives no reading (m)",
     "scale.wheel.max_turn_deg": "keyframe pairs that turned more give no reading (deg)",
     "scale.wheel.half_window": "keyframe readings on each side of the running median",
+    "scale.wheel.factor": "metres the wheels read per metre driven (a calibration: summary.json "
+                          "wheel_calibration.factor of a run without --wheels); wheel readings are divided by it "
+                          "(--wheel-factor)",
     "output": "what is written",
     "output.final_refine": "refine non-keyframe poses against the final map",
 }
@@ -305,6 +308,7 @@ KEY_BOUNDS: dict[str, tuple[float, float]] = {
     "scale.wheel.min_distance_m": (0.0, 100.0),
     "scale.wheel.max_turn_deg": (0.0, 180.0),
     "scale.wheel.half_window": (0, 10_000),
+    "scale.wheel.factor": (0.5, 2.0),
     "tracking.blurred_reference_ratio": (0.0, 1000.0),
     "tracking.scaled_relative.min_tracks": (8, 1_000_000),
     "tracking.scaled_relative.min_points": (2, 1_000_000),

@@ -11,8 +11,10 @@
 - blur bursts (forward-stop-turn with two 0.5 s yaw oscillations of 22 and 33 px of smear): every
   frame posed (IMU bridging), and the ATE against the same run rendered without blur; the
   headline pair, then a protocol of other seeds, burst times and orders (:data:`BURST_CASES`);
+- forward-stop-turn runs (no ``--wheels``) also calibrate the simulated wheels
+  (``summary.json`` ``wheel_calibration``): the factor's error against the simulated 2 %;
 - constant-velocity corridor: the IMU-only initialiser's statuses, and the scale error with the
-  wheel odometry (``--wheels``).
+  wheel odometry (``--wheels``), uncalibrated and with the factor of forward-stop-turn seed 0.
 
 Accuracy: ``eval.json`` of the run (SE3 and Sim3 alignment of the body poses); on a straight path,
 where Umeyama's rotation is undefined, the alignment about gravity (``yaw_aligned``).
@@ -22,6 +24,7 @@ Run alone: ``.venv/bin/python -m bench.bench_vio_pipeline [--quick]``.
 
 from __future__ import annotations
 
+import json
 import sys
 import tempfile
 import time
@@ -180,10 +183,23 @@ def _fst_run(work: Path, seed: int) -> tuple[RunResult, float, Path]:
     return res, secs, seq
 
 
+def _wheel_factor_error(res: RunResult) -> tuple[float, float]:
+    """The wheel calibration of a run without wheels (``summary.json``) and its error (%) against
+    the simulated wheels' scale error."""
+    cal = res.summary.get("wheel_calibration") or {}
+    factor = float(cal.get("factor") or float("nan"))
+    return factor, 100.0 * (factor / (1.0 + SimConfig().wheel_scale_error) - 1.0)
+
+
 def forward_stop_turn(work: Path) -> list[Row]:
     res, secs, seq = _fst_run(work, FST_SEEDS[0])
     after, final = _causal_scale_time(res, seq)
-    times = [after] + [_causal_scale_time(*_fst_run(work, s)[::2])[0] for s in FST_SEEDS[1:]]
+    times, factors = [after], [_wheel_factor_error(res)]
+    for s in FST_SEEDS[1:]:
+        r, _, q = _fst_run(work, s)
+        times.append(_causal_scale_time(r, q)[0])
+        factors.append(_wheel_factor_error(r))
+    cal_err = [abs(e) for _, e in factors]
     ev: dict[str, Any] = res.eval_summary or {}
     ya = ev.get("yaw_aligned") or {}
     note = (f"causal scale error at the end {final:.2f} %; final trajectory yaw-aligned ATE "
@@ -199,6 +215,11 @@ def forward_stop_turn(work: Path) -> list[Row]:
          "value": float(np.median(times)), "unit": "s", "target": "<= 3 s", "pass": bool(np.median(times) <= 3.0),
          "note": f"seeds {list(FST_SEEDS)}: {[round(t, 3) for t in times]} s; "
                  f"{sum(t <= 3.0 for t in times)} of {len(times)} within 3 s"},
+        {"name": f"VIO sim forward-stop-turn, wheel calibration over {len(FST_SEEDS)} seeds: median |factor error|",
+         "value": float(np.median(cal_err)), "unit": "%",
+         "note": f"run without --wheels; summary.json wheel_calibration.factor per seed "
+                 f"{[round(f, 4) for f, _ in factors]} against the simulated {1.0 + SimConfig().wheel_scale_error:g}; "
+                 f"errors {[round(e, 2) for _, e in factors]} %, largest {max(cal_err):.2f} %"},
     ]
 
 
@@ -276,26 +297,43 @@ def constant_velocity(work: Path) -> list[Row]:
     imu_only, secs_imu = _run(seq, work / "cv_imu")
     statuses = sorted({r.estimator.vio.vi_init.status.value for r in imu_only.records
                        if r.estimator.vio is not None and r.estimator.vio.vi_init is not None})
-    cfg = PipelineConfig()
-    cfg = dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, wheel_sigma_m_s=0.05))
-    t0 = time.perf_counter()
-    wheels = run_recording(str(seq), cfg, out=work / "cv_wheels", report=False, force=True)
-    secs = time.perf_counter() - t0
-    ev: dict[str, Any] = wheels.eval_summary or {}
-    ya = ev.get("yaw_aligned") or {}
-    scale = float(ya.get("scale_error_pct", float("nan")))
-    posed, n, _ = _posed(wheels)
-    wheel_init = [e[1] for e in wheels.summary["events"] if e[1].startswith("vi_init_wheel")]
-    note = (f"IMU-only initialiser statuses {statuses} ({secs_imu:.0f} s); with wheels: {posed}/{n} posed, "
-            f"yaw-aligned ATE {ya.get('ate_m', float('nan')):.4f} m, first wheel init "
-            f"{wheel_init[0] if wheel_init else 'none'}; the simulated wheels read 2 % long; {secs:.0f} s")
-    return [
-        {"name": "VIO sim constant-velocity 8 s: IMU initialiser reports insufficient_excitation",
-         "value": float("insufficient_excitation" in statuses), "unit": "", "note": note,
-         "target": "reported", "pass": "insufficient_excitation" in statuses and "ok" not in statuses},
-        {"name": "VIO sim constant-velocity 8 s with wheels: scale error", "value": scale, "unit": "%",
-         "note": note, "target": "<= 2 %", "pass": bool(scale <= 2.0)},
-    ]
+    # the calibration run: forward-stop-turn seed FST_SEEDS[0], same simulated wheels, without --wheels
+    cal_out = work / f"fst{FST_SEEDS[0]}_out"
+    fst = _fst_run(work, FST_SEEDS[0])[0] if not (cal_out / "summary.json").is_file() else None
+    factor = _wheel_factor_error(fst)[0] if fst is not None else float(
+        json.loads((cal_out / "summary.json").read_text())["wheel_calibration"]["factor"])
+    rows: list[Row] = []
+    for tag, f in (("uncalibrated", 1.0), ("calibrated", factor)):
+        cfg = PipelineConfig()  # as `amrvio run --wheels --wheel-factor F`
+        cfg = dataclasses.replace(
+            cfg, vio=dataclasses.replace(cfg.vio, wheel_sigma_m_s=0.05),
+            scale=dataclasses.replace(cfg.scale, wheel=dataclasses.replace(cfg.scale.wheel, enabled=True, factor=f)))
+        t0 = time.perf_counter()
+        wheels = run_recording(str(seq), cfg, out=work / f"cv_wheels_{tag}", report=False, force=True)
+        secs = time.perf_counter() - t0
+        ev: dict[str, Any] = wheels.eval_summary or {}
+        ya = ev.get("yaw_aligned") or {}
+        scale = float(ya.get("scale_error_pct", float("nan")))
+        posed, n, _ = _posed(wheels)
+        wheel_init = [e[1] for e in wheels.summary["events"] if e[1].startswith("vi_init_wheel")]
+        note = (f"IMU-only initialiser statuses {statuses} ({secs_imu:.0f} s); --wheels --wheel-factor {f:.4f}: "
+                f"{posed}/{n} posed, yaw-aligned ATE {ya.get('ate_m', float('nan')):.4f} m, first wheel init "
+                f"{wheel_init[0] if wheel_init else 'none'}; the simulated wheels read "
+                f"{100 * SimConfig().wheel_scale_error:g} % long; {secs:.0f} s")
+        if tag == "uncalibrated":
+            rows += [
+                {"name": "VIO sim constant-velocity 8 s: IMU initialiser reports insufficient_excitation",
+                 "value": float("insufficient_excitation" in statuses), "unit": "", "note": note,
+                 "target": "reported", "pass": "insufficient_excitation" in statuses and "ok" not in statuses},
+                {"name": "VIO sim constant-velocity 8 s with uncalibrated wheels: scale error", "value": scale,
+                 "unit": "%", "note": note + "; at constant velocity the wheels' own error is the scale's"},
+            ]
+        else:
+            rows.append({"name": "VIO sim constant-velocity 8 s with wheels calibrated on forward-stop-turn: "
+                                 "scale error", "value": scale, "unit": "%", "target": "<= 2 %",
+                         "pass": bool(scale <= 2.0), "note": note + f"; factor from forward-stop-turn seed "
+                                                                     f"{FST_SEEDS[0]} (a run without --wheels)"})
+    return rows
 
 
 def run_rows(quick: bool) -> list[Row]:

@@ -9,6 +9,7 @@ from typing import Any
 from amrvio.cli.args import MAX_FRAMES, SEED_RANGE, bounded, interval, max_frames_int, seed_int
 
 CAMERA_HEIGHT_M = (0.01, 100.0)
+WHEEL_FACTOR = (0.5, 2.0)
 """--camera-height range (m)."""
 
 NAME = "run"
@@ -67,6 +68,10 @@ def add_config_arguments(parser: argparse.ArgumentParser) -> None:
                              "no sideways or vertical motion) in the VIO, and as the VO's scale "
                              "source, which makes the scale metric even at constant velocity "
                              "(config: vio.wheel_sigma_m_s, scale.wheel.enabled)")
+    parser.add_argument("--wheel-factor", type=bounded(*WHEEL_FACTOR), default=None, metavar="F",
+                        help="the wheels' calibration: metres they read per metre driven, in "
+                             f"{interval(*WHEEL_FACTOR)}; wheel readings are divided by it (a run without "
+                             "--wheels measures it, see advice.txt; config: scale.wheel.factor)")
     parser.add_argument("--ba-backend", choices=("gtsam", "schur", "scipy"), default=None,
                         help="local bundle adjustment solver (default: gtsam, LM with "
                              "SEQUENTIAL_CHOLESKY; schur: the same LM in NumPy on the reduced "
@@ -94,6 +99,9 @@ def build_config(args: argparse.Namespace) -> object:
             cfg = dataclasses.replace(cfg, vio=dataclasses.replace(cfg.vio, wheel_sigma_m_s=0.05))
         cfg = dataclasses.replace(cfg, scale=dataclasses.replace(
             cfg.scale, wheel=dataclasses.replace(cfg.scale.wheel, enabled=True)))
+    if getattr(args, "wheel_factor", None) is not None:
+        cfg = dataclasses.replace(cfg, scale=dataclasses.replace(
+            cfg.scale, wheel=dataclasses.replace(cfg.scale.wheel, factor=args.wheel_factor)))
     if args.camera_height is not None:
         cfg = dataclasses.replace(cfg, scale=dataclasses.replace(
             cfg.scale, camera_height_m=args.camera_height))

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from amrvio.errors import ConfigError
 from amrvio.estimator.camera_height import HeightEstimate
 from amrvio.estimator.local_mapping import Segment
 from amrvio.types.lie import se3_matrix_inverse, so3_log
@@ -37,12 +38,20 @@ class WheelScaleConfig:
     non-holonomic ground robot (the simulator writes one for hand-held motions too), and only
     then is the wheel distance the camera's path; ``min_distance_m``: wheel distance between keyframes below which
     a pair gives no reading; ``max_turn_deg``: a larger rotation between the keyframes gives none
-    either; ``half_window``: keyframe readings on each side of the running median."""
+    either; ``half_window``: keyframe readings on each side of the running median; ``factor``:
+    metres the wheels read per metre driven, a wheel-radius calibration (``wheel_calibration``
+    in summary.json of a run without wheels, :mod:`amrvio.estimator.wheel_calibration`): every
+    wheel reading is divided by it, here and in the VIO."""
 
     enabled: bool = False
     min_distance_m: float = 0.05
     max_turn_deg: float = 10.0
     half_window: int = 10
+    factor: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.factor) and 0.5 <= self.factor <= 2.0):
+            raise ConfigError(f"scale.wheel.factor must be in [0.5, 2], got {self.factor}")
 
 
 @dataclass(frozen=True, slots=True)

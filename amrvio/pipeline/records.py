@@ -19,6 +19,7 @@ from amrvio.diagnostics.frame import FrameHealth
 from amrvio.estimator.camera_height import HeightEstimate
 from amrvio.estimator.initializer import InitResult
 from amrvio.estimator.local_mapping import KeyframeReport
+from amrvio.estimator.wheel_calibration import WheelCalibration
 from amrvio.frontend.tracking_types import TrackingReport
 from amrvio.pipeline.vio_report import VioReport
 from amrvio.types.lie import SE3
@@ -97,8 +98,9 @@ class BodyTrajectory:
 class PipelineOutput:
     """The run: one record per frame (final poses), (N, 4, 4) ``T_world_cam`` of the refined
     trajectory, keyframe frame indices, (P, 3) map points, the camera-height readings, the
-    per-frame scale, seconds per stage, and the body trajectory of the visual-inertial run (None
-    when it did not run or never initialised)."""
+    per-frame scale, seconds per stage, the body trajectory of the visual-inertial run (None
+    when it did not run or never initialised), and the wheels' calibration against it (None
+    without wheel odometry or body trajectory)."""
 
     records: tuple[FrameRecord, ...]
     T_world_cam: F64
@@ -108,6 +110,7 @@ class PipelineOutput:
     frame_scale: F64
     timings_s: dict[str, float]
     body: BodyTrajectory | None = None
+    wheel_calibration: WheelCalibration | None = None
 
     @property
     def stamps_ns(self) -> NDArray[np.int64]:

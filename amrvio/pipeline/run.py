@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from amrvio.config import PipelineConfig, config_to_dict
 from amrvio.diagnostics.health import health_rows
 from amrvio.errors import DatasetFormatError
+from amrvio.estimator.wheel_calibration import calibrate_wheel
 from amrvio.imu.window import frame_imu_window
 from amrvio.io.base import Dataset, SkippedFrame, load_checked
 from amrvio.pipeline.diagnose import DiagnosticsSetup, setup_diagnostics
@@ -32,7 +33,7 @@ from amrvio.pipeline.events import flagged_ranges
 from amrvio.pipeline.pipeline import Pipeline, PipelineOutput
 from amrvio.pipeline.records import FrameRecord, PoseStatus
 from amrvio.pipeline.vio_report import VIO_COLUMNS, ImuSetup
-from amrvio.types.sensors import Frame, ImuNoise
+from amrvio.types.sensors import Frame, ImuNoise, WheelData
 from amrvio.types.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -71,9 +72,9 @@ def run_pipeline(
         raise DatasetFormatError(dataset.root, "the dataset has no camera calibration; pass one")
     if diagnostics is None and cfg.diagnose:
         diagnostics = setup_diagnostics(dataset, cfg.diagnostics)
+    wheel = wheel_readings(dataset, cfg)
     inertial = imu_setup(dataset, cfg)
-    pipe = Pipeline(cam, cfg, diagnostics.stage if diagnostics is not None else None, inertial,
-                    wheel=dataset.wheel)
+    pipe = Pipeline(cam, cfg, diagnostics.stage if diagnostics is not None else None, inertial, wheel=wheel)
     expo_default = diagnostics.config.assumed_exposure_s if diagnostics is not None else None
     frames = dataset.frames[:max_frames] if max_frames else dataset.frames
     it: Iterable[Frame] = frames
@@ -110,7 +111,18 @@ def run_pipeline(
     if first_skip is not None and not pipe.records and not stopped:
         raise DatasetFormatError(first_skip.file, f"{first_skip.problem}; no usable image: all "
                                                   f"{n_skipped} frames are unusable")
-    return pipe.finish()
+    out = pipe.finish()
+    if wheel is not None and out.body is not None:
+        out = dataclasses.replace(out, wheel_calibration=calibrate_wheel(
+            out.stamps_ns, out.body.T_world_body, out.body.init_frame, wheel, applied=cfg.scale.wheel.factor,
+            wheels_used=cfg.vio.wheel_sigma_m_s > 0 or cfg.scale.wheel.enabled))
+    return out
+
+
+def wheel_readings(dataset: Dataset, config: PipelineConfig) -> WheelData | None:
+    """The recording's wheel odometry divided by its calibration ``scale.wheel.factor``."""
+    factor = config.scale.wheel.factor
+    return dataset.wheel if dataset.wheel is None or factor == 1.0 else dataset.wheel.divided(factor)
 
 
 def imu_setup(dataset: Dataset, config: PipelineConfig) -> ImuSetup | None:
@@ -118,7 +130,8 @@ def imu_setup(dataset: Dataset, config: PipelineConfig) -> ImuSetup | None:
     ``config.vio.enabled`` (None: the VO alone). Without a noise file, the ADIS16448's."""
     if dataset.imu is None or len(dataset.imu) < 2 or dataset.T_body_cam is None or not config.vio.enabled:
         return None
-    return ImuSetup(dataset.imu_noise or ImuNoise.euroc_adis16448(), dataset.T_body_cam, dataset.wheel)
+    return ImuSetup(dataset.imu_noise or ImuNoise.euroc_adis16448(), dataset.T_body_cam,
+                    wheel_readings(dataset, config))
 
 
 def diagnose(dataset: Dataset, config: PipelineConfig | None = None, *,
@@ -256,7 +269,8 @@ def write_outputs(out: PipelineOutput, out_dir: Path, config: PipelineConfig | N
     with replacing(out_dir / "health.csv") as tmp:
         write_health(tmp, records, online_status)
     with replacing(out_dir / "advice.txt") as tmp:
-        write_advice(tmp, records, config or PipelineConfig(), notes)
+        write_advice(tmp, records, config or PipelineConfig(),
+                     [*notes, *([] if out.wheel_calibration is None else [out.wheel_calibration.advice()])])
     with replacing(out_dir / "scale_drift.csv") as tmp:
         _write_scale_drift(tmp, out, stamps_s)
     write_json(out_dir / "timings.json", {"timings_s": {
@@ -350,6 +364,7 @@ def summarise(out: PipelineOutput, config: PipelineConfig | None, *,
                            for c, rr in flagged_ranges(out.records).items()},
         "skipped_frames": [{"index": s.index, "t_ns": s.t_ns, "file": s.file, "problem": s.problem}
                            for s in skipped],
+        "wheel_calibration": None if out.wheel_calibration is None else out.wheel_calibration.as_dict(),
         "config": config_to_dict(config or PipelineConfig()),
     }
 
@@ -365,5 +380,5 @@ def _write_ply(path: Path, pts: np.ndarray) -> None:
 
 
 __all__ = ["BODY_TRAJECTORY_COMMENT", "FRAME_COLUMNS", "TRAJECTORY_COMMENT", "FrameSink", "diagnose", "finite_json",
-           "frame_row", "imu_setup", "pose_rows", "replacing", "run_pipeline", "summarise", "write_advice",
-           "write_health", "write_json", "write_outputs"]
+           "frame_row", "imu_setup", "pose_rows", "replacing", "run_pipeline", "summarise", "wheel_readings",
+           "write_advice", "write_health", "write_json", "write_outputs"]

@@ -96,6 +96,11 @@ class WheelData:
     def __len__(self) -> int:
         return int(self.stamps_ns.shape[0])
 
+    def divided(self, factor: float) -> WheelData:
+        """The readings divided by ``factor`` (a wheel-radius calibration: metres read per metre
+        driven scale the speed and the yaw rate of a differential drive alike)."""
+        return WheelData(self.stamps_ns, self.v_forward_m_s / factor, self.yaw_rate_rad_s / factor)
+
     def distance_m(self, t0_ns: int, t1_ns: int) -> float:
         """Path length (m) driven in [t0_ns, t1_ns]: the integral of |speed|, linear between
         readings (trapezoids; the speed at t0 and t1 interpolated). NaN when the readings do not

@@ -31,6 +31,7 @@ BAD: list[tuple[str, str, tuple[str, ...]]] = [
     ("run", "--camera-height", (*FLOAT_JUNK, "0", "-1", "0.001", "101")),
     ("run", "--max-frames", (*INT_JUNK, "0", "-1", "10000001")),
     ("run", "--seed", (*INT_JUNK, "-1", "4294967296")),
+    ("run", "--wheel-factor", (*FLOAT_JUNK, "0", "-1", "0.49", "2.01")),
     ("batch", "--jobs", (*INT_JUNK, "0", "-1", "1025")),
     ("batch", "--max-frames", (*INT_JUNK, "0", "-1", "10000001")),
     ("batch", "--camera-height", (*FLOAT_JUNK, "0", "101")),
@@ -81,7 +82,8 @@ def test_a_bad_option_value_is_one_line(cmd: str, option: str, value: str,
 
 # every numeric option states its range in --help, and the error states the same range
 RANGED = [("run", "--camera-height", "[0.01, 100]"), ("run", "--max-frames", "[1, 10000000]"),
-          ("run", "--seed", "[0, 4294967295]"), ("batch", "--jobs", "[1, 1024]"),
+          ("run", "--seed", "[0, 4294967295]"), ("run", "--wheel-factor", "[0.5, 2]"),
+          ("batch", "--jobs", "[1, 1024]"),
           ("batch", "--camera-height", "[0.01, 100]"), ("diagnose", "--ev-step", "(0, 20]"),
           ("diagnose", "--assumed-exposure-ms", "(0, 1000]"),
           ("diagnose", "--smear-bound-px", "(0, 1000]"), ("eval", "--delta", "(0, 1e6]"),
