@@ -215,7 +215,8 @@ HELP: dict[str, str] = {
     "recovery": "relocalisation in the lost map (ORB keyframe retrieval + PnP) after a loss",
     "recovery.enabled": "try relocalisation before starting a new map",
     "recovery.max_features": "ORB descriptors kept per keyframe",
-    "recovery.max_bridge_frames": "unusable frames after which the map is searched first",
+    "recovery.max_bridge_frames": "unusable frames after which the map is searched first (without an IMU; with one "
+                                  "the gyro predicts the tracks, and the map is searched if they fail)",
     "recovery.reloc": "relocalisation gates (ORB-SLAM's)",
     "vio": "visual-inertial odometry, when the recording has an IMU",
     "vio.enabled": "run VIO when the recording has an IMU (false, or --no-imu: the VO alone)",

@@ -398,7 +398,10 @@ def test_the_gyro_predicts_the_klt_after_the_frames_a_yaw_burst_bridged(tmp_path
     rotated far from its reference image; with the motion model's rotation as the KLT prediction
     it lost the map after the first burst, the smoother restarted on a state jump and the run's
     ATE was 0.117 m; the gyro's rotation since the reference keeps the map and the smoother
-    (0.012 m)."""
+    (0.012 m). Each burst is a gap of more than ``recovery.max_bridge_frames``; with the gyro the
+    tracks are tried before the map is searched by appearance: the search found 7 matches after
+    the first burst and was rejected as a jump after the second (0.0060 m either way), and the
+    blurred run of the same drive went from 0.0079 to 0.0059 m once its tracks kept their ids."""
     seq = tmp_path / "seq"
     simulate(SimConfig(motion="forward-stop-turn", seconds=8.0, width=376, height=240, seed=1,
                        blur_bursts="2.0:0.5:10,6.0:0.5:12", blur=False), seq)
@@ -406,7 +409,7 @@ def test_the_gyro_predicts_the_klt_after_the_frames_a_yaw_burst_bridged(tmp_path
     gated = [r.index for r in res.records if "smear_gated" in r.events]
     assert len(gated) >= 4
     events = [e for r in res.records for e in r.events]
-    assert not any(e.startswith(("lost:", "vio_reinit")) for e in events), events
+    assert not any(e.startswith(("lost:", "vio_reinit", "reloc")) for e in events), events
     gt = open_dataset(str(seq)).groundtruth
     assert gt is not None and res.output.body is not None
     t_s = np.array([r.t_ns for r in res.records]) * 1e-9
