@@ -48,7 +48,7 @@ from amrvio.estimator.vio_graph import (
     sym,
 )
 from amrvio.estimator.vio_landmarks import LandmarkTracks, project_px
-from amrvio.estimator.vio_triangulate import keyframe_parallax_deg, triangulate_pending
+from amrvio.estimator.vio_triangulate import keyframe_due, triangulate_pending
 from amrvio.estimator.vio_types import (
     EstimateKind,
     FrameResult,
@@ -363,12 +363,11 @@ class VioBackend:
         return ok & (np.abs(np.log(np.where(ok, r0, 1.0) / np.where(ok, r1, 1.0))) <= limit)
 
     def _is_keyframe(self, seen: list[tuple[int, F64]], T_wc_pred: SE3, last_kf: WindowFrame) -> bool:
-        vis = self.cfg.visual
-        if len(seen) < max(vis.min_tracked_landmarks, 1):
-            return True
-        Xw = np.array([self._landmark(key) for key, _ in seen])
-        parallax = keyframe_parallax_deg(Xw, self._kf_camera(last_kf.index).t, T_wc_pred.t)
-        return parallax >= vis.keyframe_parallax_deg
+        Xw = np.array([self._landmark(key) for key, _ in seen]).reshape(-1, 3)
+        if len(Xw):
+            self._tracks.typical_depth_m = float(np.median(np.linalg.norm(Xw - T_wc_pred.t, axis=1)))
+        return keyframe_due(Xw, self._kf_camera(last_kf.index).t, T_wc_pred.t, self._tracks.typical_depth_m,
+                            self.cfg.visual)
 
     def _age_noise(self, age: int) -> gtsam.noiseModel.Base | None:
         """The pixel noise of an observation of a landmark first seen ``age`` frames ago (None:

@@ -84,13 +84,15 @@ class LandmarkTracks:
     """Pending tracks and active landmarks, by front-end id (see the module docstring).
 
     pending: id -> [(keyframe index, uv (2,))]; active: id -> Landmark; seeds: id -> a world
-    position the initialiser already had (the starting guess instead of triangulation).
+    position the initialiser already had (the starting guess instead of triangulation);
+    typical_depth_m: the median distance of the landmarks the newest frame that saw any saw.
     """
 
     pending: dict[int, list[tuple[int, F64]]] = field(default_factory=dict)
     active: dict[int, Landmark] = field(default_factory=dict)
     seeds: dict[int, F64] = field(default_factory=dict)
     next_key: int = 0
+    typical_depth_m: float | None = None
 
     def observe_pending(self, lm_id: int, kf: int, uv: F64) -> None:
         self.pending.setdefault(lm_id, []).append((kf, np.asarray(uv, dtype=np.float64)))

@@ -31,6 +31,24 @@ def keyframe_parallax_deg(points_world: F64, center_a: F64, center_b: F64) -> fl
     return float(np.degrees(np.median(np.arccos(np.clip(cos, -1.0, 1.0)))))
 
 
+def keyframe_due(points_seen: F64, center_last_kf: F64, center_now: F64, typical_depth_m: float | None,
+                 vis: VisualConfig) -> bool:
+    """Whether a frame that sees the landmarks ``points_seen`` (N, 3), with its camera centre at
+    ``center_now``, becomes a keyframe: when their median parallax from the last keyframe's centre
+    reaches ``keyframe_parallax_deg``, or when it sees fewer than ``min_tracked_landmarks`` and
+    has moved far enough from that keyframe for new landmarks: ``keyframe_parallax_deg`` at
+    ``typical_depth_m`` (the median distance of the landmarks seen lately; None: not known, any
+    move). A keyframe that adds no baseline triangulates nothing, and each one slides the window:
+    standing or turning in place with few landmarks in view, a keyframe on every frame
+    marginalised the window's landmarks within ``window_keyframes`` frames."""
+    if points_seen.shape[0] < max(vis.min_tracked_landmarks, 1):
+        if typical_depth_m is None:
+            return True
+        baseline = float(np.linalg.norm(np.asarray(center_now) - np.asarray(center_last_kf)))
+        return baseline >= typical_depth_m * float(np.tan(np.radians(vis.keyframe_parallax_deg)))
+    return keyframe_parallax_deg(points_seen, center_last_kf, center_now) >= vis.keyframe_parallax_deg
+
+
 def triangulate_pending(tracks: LandmarkTracks, obs: VisualObservations, k: int, cams: dict[int, SE3],
                         ordinals: dict[int, int], cam: Camera, vis: VisualConfig, graph: gtsam.NonlinearFactorGraph,
                         values: gtsam.Values,
@@ -115,4 +133,4 @@ def landmark_prior_share(prior_range: float, parallax_deg: float, pixel_sigma_px
     return float(info_prior / (info_prior + info_views))
 
 
-__all__ = ["keyframe_parallax_deg", "landmark_prior_share", "triangulate_pending"]
+__all__ = ["keyframe_due", "keyframe_parallax_deg", "landmark_prior_share", "triangulate_pending"]

@@ -45,8 +45,10 @@ class VisualConfig:
     2.3 % to 1.4 % (bench_vio_pipeline). min_depth_m / max_depth_m: accepted landmark depths.
     keyframe_parallax_deg: a frame becomes a keyframe when the landmarks it sees moved this much
     (median angle at the landmark between its camera centre and the last keyframe's), or when
-    it sees fewer than
-    min_tracked_landmarks landmarks; other frames stay in the window only until the next one.
+    it sees fewer than min_tracked_landmarks landmarks and its camera moved the baseline that
+    makes this angle at the typical depth of the landmarks seen lately
+    (:func:`amrvio.estimator.vio_triangulate.keyframe_due`); other frames stay in the window
+    only until the next one.
     landmark_prior_range: a triangulated landmark gets an isotropic prior at its triangulated
     position with a standard deviation of this many times its range from its first camera (0:
     none). It keeps the linear system determined when the rays of a landmark become nearly

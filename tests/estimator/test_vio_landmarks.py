@@ -7,7 +7,12 @@ import pytest
 
 from amrvio.errors import ConfigError
 from amrvio.estimator.vio_landmarks import LandmarkTracks, project_px, triangulate_tracks
-from amrvio.estimator.vio_triangulate import keyframe_parallax_deg, landmark_prior_share, triangulate_pending
+from amrvio.estimator.vio_triangulate import (
+    keyframe_due,
+    keyframe_parallax_deg,
+    landmark_prior_share,
+    triangulate_pending,
+)
 from amrvio.estimator.vio_types import VisualConfig
 from amrvio.types.lie import SE3, SO3
 
@@ -61,6 +66,23 @@ def test_keyframe_parallax_is_the_angle_the_baseline_makes_at_the_points() -> No
     assert ang == pytest.approx(np.degrees(2 * np.arctan(0.05 / 10.0)))
     assert keyframe_parallax_deg(pts, np.zeros(3), np.zeros(3)) == 0.0
     assert keyframe_parallax_deg(np.zeros((0, 3)), np.zeros(3), np.ones(3)) == 0.0
+
+
+def test_a_frame_that_sees_few_landmarks_is_a_keyframe_only_once_it_has_moved() -> None:
+    """With fewer than ``min_tracked_landmarks`` in view, a keyframe needs the baseline that makes
+    ``keyframe_parallax_deg`` (1 deg) at the typical depth (4 m: tan 1 deg * 4 m = 6.98 cm); an
+    unknown depth takes any frame. With enough landmarks the parallax rule decides."""
+    vis = VisualConfig()
+    few = np.array([[0.0, 0.0, 4.0]] * (vis.min_tracked_landmarks - 1))
+    c0 = np.zeros(3)
+    assert not keyframe_due(few, c0, np.array([0.0698, 0.0, 0.0]), 4.0, vis)
+    assert keyframe_due(few, c0, np.array([0.0699, 0.0, 0.0]), 4.0, vis)
+    assert keyframe_due(few, c0, c0, None, vis)
+    assert keyframe_due(np.zeros((0, 3)), c0, c0, None, vis)
+    many = np.tile([[0.0, 0.0, 4.0]], (vis.min_tracked_landmarks, 1))
+    b = 4.0 * np.tan(np.radians(1.0))  # the parallax at a point straight ahead: atan(b / 4) for a sideways b
+    assert not keyframe_due(many, c0, np.array([0.99 * b, 0.0, 0.0]), None, vis)
+    assert keyframe_due(many, c0, np.array([1.01 * b, 0.0, 0.0]), None, vis)
 
 
 def test_tracks_forget_what_left_the_window() -> None:
