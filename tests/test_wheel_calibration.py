@@ -73,6 +73,16 @@ def test_the_wheels_noise_at_a_standstill_does_not_lengthen_the_drive() -> None:
     assert cal.factor == pytest.approx(1.0, abs=0.003)
 
 
+def test_the_displacement_nets_out_a_reversal_and_the_distance_does_not() -> None:
+    t = np.arange(0, 2001, 10, dtype=np.int64) * 1_000_000  # 2 s at 100 Hz
+    v = np.where(t < 1_000_000_000, 1.0, -1.0)
+    w = WheelData(t, v, np.zeros_like(v))
+    assert w.distance_m(0, int(t[-1])) == pytest.approx(2.0, abs=0.011)
+    assert w.displacement_m(0, int(t[-1])) == pytest.approx(0.0, abs=0.011)
+    assert w.displacement_m(0, 500_000_000) == pytest.approx(0.5)
+    assert math.isnan(w.displacement_m(0, int(t[-1]) + 1))  # not covered
+
+
 def test_a_factor_already_applied_is_part_of_the_reported_one() -> None:
     stamps, T, wheel = _case(1.03)
     cal = calibrate_wheel(stamps, T, 0, wheel.divided(1.01), applied=1.01)

@@ -96,18 +96,6 @@ class WheelCalibration:
                 "stretches": [[s.first, s.last, round(s.wheel_m, 6), round(s.vio_m, 6)] for s in self.stretches]}
 
 
-def _signed_distance(wheel: WheelData, t0_ns: int, t1_ns: int) -> float:
-    """The integral of the signed forward speed over [t0, t1] (trapezoids, as
-    ``WheelData.distance_m``): on a straight line, the displacement, whatever the stops and
-    reversals (the speed's noise at a standstill averages out instead of adding up)."""
-    t = wheel.stamps_ns
-    lo = int(np.searchsorted(t, t0_ns, side="right"))
-    hi = int(np.searchsorted(t, t1_ns, side="left"))
-    ts = np.concatenate([[t0_ns], t[lo:hi], [t1_ns]]).astype(np.float64) * 1e-9
-    v = np.interp(ts, t.astype(np.float64) * 1e-9, wheel.v_forward_m_s)
-    return float(np.sum(0.5 * (v[1:] + v[:-1]) * np.diff(ts)))
-
-
 def straight_stretches(stamps_ns: I64, T_world_body: F64, first: int, wheel: WheelData,
                        config: WheelCalibrationConfig) -> list[Stretch]:
     """The straight stretches of the body trajectory from record ``first`` on (records without a
@@ -127,10 +115,8 @@ def straight_stretches(stamps_ns: I64, T_world_body: F64, first: int, wheel: Whe
         while j + 1 < n and ok[j + 1] and np.linalg.norm(so3_log(R0.T @ T_world_body[j + 1, :3, :3])) <= max_turn:
             j += 1
         if j > i:
-            t0, t1 = int(stamps_ns[i]), int(stamps_ns[j])
-            along = abs(_signed_distance(wheel, t0, t1)) if t0 >= wheel.stamps_ns[0] and \
-                t1 <= wheel.stamps_ns[-1] else float("nan")
-            if along >= config.min_stretch_m:
+            along = abs(wheel.displacement_m(int(stamps_ns[i]), int(stamps_ns[j])))
+            if along >= config.min_stretch_m:  # False for NaN: the readings do not cover it
                 vio = float(np.linalg.norm(T_world_body[j, :3, 3] - T_world_body[i, :3, 3]))
                 out.append(Stretch(i, j, along, vio))
         i = j + 1 if j > i else i + 1

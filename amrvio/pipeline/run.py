@@ -115,7 +115,7 @@ def run_pipeline(
     if wheel is not None and out.body is not None:
         out = dataclasses.replace(out, wheel_calibration=calibrate_wheel(
             out.stamps_ns, out.body.T_world_body, out.body.init_frame, wheel, applied=cfg.scale.wheel.factor,
-            wheels_used=cfg.vio.wheel_sigma_m_s > 0 or cfg.scale.wheel.enabled))
+            wheels_used=cfg.vio.wheel_sigma_m_s > 0))
     return out
 
 

@@ -105,13 +105,23 @@ class WheelData:
         """Path length (m) driven in [t0_ns, t1_ns]: the integral of |speed|, linear between
         readings (trapezoids; the speed at t0 and t1 interpolated). NaN when the readings do not
         cover the interval."""
+        return self._integral(t0_ns, t1_ns, signed=False)
+
+    def displacement_m(self, t0_ns: int, t1_ns: int) -> float:
+        """The integral of the signed forward speed over [t0_ns, t1_ns], as :meth:`distance_m`:
+        on a straight line the displacement, whatever the stops and reversals (the speed's noise
+        at a standstill averages out instead of adding up)."""
+        return self._integral(t0_ns, t1_ns, signed=True)
+
+    def _integral(self, t0_ns: int, t1_ns: int, signed: bool) -> float:
         t = self.stamps_ns
         if len(self) < 2 or t0_ns < t[0] or t1_ns > t[-1] or t1_ns < t0_ns:
             return float("nan")
         lo = int(np.searchsorted(t, t0_ns, side="right"))
         hi = int(np.searchsorted(t, t1_ns, side="left"))
         ts = np.concatenate([[t0_ns], t[lo:hi], [t1_ns]]).astype(np.float64) * 1e-9
-        speed = np.abs(np.interp(ts, t.astype(np.float64) * 1e-9, self.v_forward_m_s))
+        speed = np.interp(ts, t.astype(np.float64) * 1e-9, self.v_forward_m_s)
+        speed = speed if signed else np.abs(speed)
         return float(np.sum(0.5 * (speed[1:] + speed[:-1]) * np.diff(ts)))
 
 
