@@ -84,8 +84,8 @@ class WheelCalibration:
             return ("wheel calibration: not measured, the wheels were used in this run; run once "
                     "without --wheels over a drive that starts, stops and turns to calibrate them")
         if self.status is not WheelCalibrationStatus.OK:
-            return (f"wheel calibration: {self.wheel_m:.2f} m of straight driving after the VIO "
-                    f"started, fewer than needed; drive straight for a few metres, with starts and stops")
+            return (f"wheel calibration: only {self.wheel_m:.2f} m of straight driving after the VIO "
+                    f"started, too little; drive straight for a few metres, with starts and stops")
         return (f"wheel calibration: the wheels read {100.0 * (self.factor - 1.0):+.2f} % against the VIO over "
                 f"{self.wheel_m:.2f} m of straight driving ({len(self.stretches)} stretches); for later runs "
                 f"of this robot with --wheels, pass --wheel-factor {self.factor:.4f}")
