@@ -18,6 +18,7 @@ add up to ``min_total_m`` of driving, and it is as good as the VIO's scale over 
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 from dataclasses import dataclass
@@ -134,12 +135,10 @@ def calibrate_wheel(stamps_ns: I64, T_world_body: F64, first: int, wheel: WheelD
         return WheelCalibration(WheelCalibrationStatus.WHEELS_USED, float("nan"), applied, ())
     cfg = config or WheelCalibrationConfig()
     stretches = tuple(straight_stretches(np.asarray(stamps_ns, dtype=np.int64), T_world_body, first, wheel, cfg))
-    wheel_m = sum(s.wheel_m for s in stretches)
-    vio_m = sum(s.vio_m for s in stretches)
-    if wheel_m < cfg.min_total_m or vio_m <= 0:
-        return WheelCalibration(WheelCalibrationStatus.TOO_LITTLE_STRAIGHT_DRIVING, float("nan"), applied,
-                                stretches)
-    return WheelCalibration(WheelCalibrationStatus.OK, applied * wheel_m / vio_m, applied, stretches)
+    cal = WheelCalibration(WheelCalibrationStatus.TOO_LITTLE_STRAIGHT_DRIVING, float("nan"), applied, stretches)
+    if cal.wheel_m < cfg.min_total_m or cal.vio_m <= 0:
+        return cal
+    return dataclasses.replace(cal, status=WheelCalibrationStatus.OK, factor=applied * cal.wheel_m / cal.vio_m)
 
 
 __all__ = ["Stretch", "WheelCalibration", "WheelCalibrationConfig", "WheelCalibrationStatus", "calibrate_wheel",

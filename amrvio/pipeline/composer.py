@@ -136,9 +136,9 @@ class TrajectoryComposer:
             return T_cw
         return T
 
-    def finish(self, segments: list[Segment], frame_scale: F64 | None) -> ComposedTrajectory:
-        """Compose all poses; ``frame_scale`` (N,), when a scale source is active, scales each
-        position increment."""
+    def finish(self, segments: list[Segment]) -> ComposedTrajectory:
+        """Compose all poses, in the segments' units (:meth:`ComposedTrajectory.scaled` applies a
+        scale source's per-frame scale)."""
         n = len(self.anchors)
         T_wc = np.zeros((n, 4, 4))
         for i, a in enumerate(self.anchors):
@@ -157,8 +157,7 @@ class TrajectoryComposer:
         tracked = np.flatnonzero([s is PoseStatus.TRACKED for s in statuses])
         if len(tracked):
             T_wc = _fill_interpolated(T_wc, statuses, tracked)
-        composed = ComposedTrajectory(T_wc, tuple(statuses))
-        return composed if frame_scale is None else composed.scaled(frame_scale)
+        return ComposedTrajectory(T_wc, tuple(statuses))
 
 
     def _resolve_frames(self, T_wc: F64) -> list[PoseStatus]:

@@ -380,7 +380,7 @@ class Pipeline:
                                   self.all_timings())
         stamps = np.array([r.t_ns for r in self.records], dtype=np.int64)
         frame_scale = self.scale.frame_scales(n, stamps) if self.scale.active else None
-        unscaled = self.composer.finish(self.mapping.segments, None)  # the VIO's initialisation placed these
+        unscaled = self.composer.finish(self.mapping.segments)  # the VIO puts these in its world, at its scale
         composed = unscaled if frame_scale is None else unscaled.scaled(frame_scale)
         fs = frame_scale if frame_scale is not None else np.ones(n)
         g_scale = float(np.median(fs)) if n else 1.0
