@@ -5,12 +5,16 @@ where no IMU can give the scale, against ground truth."""
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
+from typing import cast
 
 import numpy as np
 import pytest
 
 import amrvio
 from amrvio.errors import DatasetFormatError, ShapeError
+from amrvio.estimator.local_mapping import Segment
+from amrvio.estimator.wheel_scale import WheelScale, WheelScaleConfig
 from amrvio.io.base import read_wheel_csv
 from amrvio.io.dataset import open_dataset
 from amrvio.sim.simulate import SimConfig, simulate
@@ -94,3 +98,31 @@ def test_wheels_only_when_asked(calibrated: Path) -> None:
     res = amrvio.run(calibrated, report=False, max_frames=20)
     assert res.evaluation is not None
     assert res.evaluation.summary["metric_scale_source"] is None
+
+
+def test_a_stop_between_two_keyframes_adds_no_distance() -> None:
+    """Two keyframes 0.2 m apart in the map (scale 1), the robot drives 0.1 m, stands for 4 s
+    and drives 0.1 m between them, with the simulator's 1 cm/s of white speed noise, at 100 Hz.
+    The reading is the signed integral, as the map's straight-line distance: 1.0, with a noise
+    of 0.01 m/s x sqrt(600) x 0.01 s = 2.4 mm (1.2 %). The integral of |speed| adds
+    4 s x 0.8 cm/s = 3.2 cm (1.16)."""
+    t = np.arange(0, 6001, 10, dtype=np.int64) * 1_000_000  # 6 s at 100 Hz
+    ts = t * 1e-9
+    v = np.where(ts < 1.0, 0.1, np.where(ts < 5.0, 0.0, 0.1))
+    v = v + np.random.default_rng(0).normal(0.0, 0.01, len(v))
+    wheel = WheelData(t, v, np.zeros_like(v))
+
+    def kf(index: int, x: float) -> SimpleNamespace:
+        T = np.eye(4)
+        T[0, 3] = -x  # T_cam_world of a camera at (x, 0, 0)
+        return SimpleNamespace(frame_index=index, T_cam_world=T)
+
+    segment = SimpleNamespace(mapper=SimpleNamespace(map=SimpleNamespace(keyframes=[kf(0, 0.0), kf(1, 0.2)])),
+                              world_from_segment=SimpleNamespace(s=1.0))
+    ws = WheelScale(wheel, WheelScaleConfig(enabled=True))
+    ws.observe_keyframe(cast(Segment, segment), 0)
+    ws.frame_scales(2, np.array([0, int(t[-1])], dtype=np.int64))
+    (reading,) = ws.wheel_readings
+    assert reading.map_units == pytest.approx(0.2)
+    assert reading.scale == pytest.approx(1.0, abs=0.04)
+    assert wheel.distance_m(0, int(t[-1])) / 0.2 > 1.1  # what the path length would have read

@@ -3,8 +3,10 @@ keyframes against the distance the camera moved in the map.
 
 A ground robot's wheels give the path length at any speed, including the constant velocity at
 which an IMU cannot tell scale. For each pair of consecutive keyframes of a map segment the
-reading is ``scale = d_wheel / d_map``: ``d_wheel`` the integral of the wheel speed between the
-keyframes' times, ``d_map`` the distance between their (bundle-adjusted) camera centres in global
+reading is ``scale = d_wheel / d_map``: ``d_wheel`` the integral of the signed wheel speed between
+the keyframes' times (a displacement, as ``d_map``; the speed's noise over a stop between two
+keyframes nets out, where its absolute value adds 0.8 cm per second at the simulator's 1 cm/s),
+``d_map`` the distance between their (bundle-adjusted) camera centres in global
 units. Pairs are left out when the robot barely moved (``min_distance_m``; the map distance is
 then mostly noise) or turned by more than ``max_turn_deg`` (the camera, mounted off the axle,
 then moves along a different path from the wheels). The readings are combined by a running
@@ -108,7 +110,9 @@ def _pair_readings(segment: Segment, seg_id: int, wheel: WheelData, stamps_ns: I
     for a, b in zip(kfs[:-1], kfs[1:], strict=True):
         if b.frame_index >= len(stamps_ns):
             continue
-        d_wheel = wheel.distance_m(int(stamps_ns[a.frame_index]), int(stamps_ns[b.frame_index]))
+        # the signed integral: the map distance is the straight line between the keyframes, and the
+        # speed's noise over a stop between them averages out instead of adding up
+        d_wheel = abs(wheel.displacement_m(int(stamps_ns[a.frame_index]), int(stamps_ns[b.frame_index])))
         T_ba = b.T_cam_world @ se3_matrix_inverse(a.T_cam_world)
         d_map = s * float(np.linalg.norm(T_ba[:3, 3]))  # |c_b - c_a| = |t_ba|
         turn = math.degrees(float(np.linalg.norm(so3_log(T_ba[:3, :3]))))
