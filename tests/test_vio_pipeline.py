@@ -343,6 +343,38 @@ def test_a_frame_that_leaves_the_window_moves_with_its_keyframe() -> None:
     np.testing.assert_allclose(tr.poses[3], kf3.matrix(), atol=1e-12)
 
 
+def test_an_update_after_a_gap_spreads_its_correction_over_the_bridged_frames() -> None:
+    """Frames 1-3 are bridged between keyframe 0 and the update of frame 4; the IMU prediction
+    through the gap drifts from the truth linearly in time (position and rotation), and the update
+    measures the truth at frame 4, while it also moves the window (a gauge shift). Spread linearly
+    in time, the correction puts the bridged frames on the shifted truth, exactly for a linear
+    drift. Without it they kept the drift up to their own time."""
+    tr = BodyTrack()
+    e_w, e_p = np.array([0.01, -0.02, 0.04]), np.array([0.04, -0.03, 0.02])
+
+    def truth(j: int) -> SE3:
+        return SE3(SO3.exp([0.0, 0.0, 0.05 * j]), np.array([0.1 * j, 0.0, 0.0]))
+
+    def predicted(j: int) -> SE3:
+        w = j / 4
+        return SE3(SO3(SO3.exp(-w * e_w).matrix() @ truth(j).R), truth(j).t - w * e_p)
+
+    tr.set(0, 0, truth(0))
+    tr.update(((_state(0, truth(0)), True),), 0)
+    for j in (1, 2, 3):
+        tr.set(j, 100 * j, predicted(j), bridged=True)
+        tr.update(((_state(0, truth(0)), True),), j)
+    shift = SE3(SO3.exp([0.0, 0.0, 0.3]), np.array([0.05, -0.02, 0.01]))
+    tr.set(4, 400, shift @ truth(4), predicted=predicted(4))
+    tr.update(((_state(0, shift @ truth(0)), True), (_state(400, shift @ truth(4)), True)), 4)
+    for j in (1, 2, 3, 4):
+        np.testing.assert_allclose(tr.poses[j], (shift @ truth(j)).matrix(), atol=1e-12)
+    # a start (no prediction) closes nothing: its frames keep what they had
+    tr.set(5, 500, predicted(5), bridged=True)
+    tr.set(6, 600, truth(6))
+    np.testing.assert_allclose(tr.poses[5], predicted(5).matrix(), atol=1e-12)
+
+
 def test_the_final_trajectory_moves_like_the_truth_from_frame_to_frame(vio_run: RunResult, sim_dir: Path) -> None:
     """Each frame's step in the final body trajectory against the truth's: the non-keyframes
     follow their keyframes' final estimates (largest step error on this drive 0.88 cm, median

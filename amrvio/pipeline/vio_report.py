@@ -21,7 +21,7 @@ from amrvio.frontend.tracks import TrackSet
 from amrvio.imu.propagation import InertialState
 from amrvio.imu.static_init import StaticInitResult
 from amrvio.pipeline.zero_velocity import ZeroVelocity, ZeroVelocityConfig
-from amrvio.types.lie import SE3, se3_matrix_inverse
+from amrvio.types.lie import SE3, se3_matrix_inverse, so3_exp, so3_log
 from amrvio.types.sensors import ImuData, ImuNoise, WheelData
 
 F64 = NDArray[np.float64]
@@ -179,16 +179,62 @@ class BodyTrack:
     index_of: dict[int, int] = field(default_factory=dict)
     bridged: set[int] = field(default_factory=set)
     anchored: dict[int, list[tuple[int, F64]]] = field(default_factory=dict)  # keyframe -> (frame, T_kf_frame)
+    gap: list[tuple[int, int]] = field(default_factory=list)  # (index, t_ns) bridged since the last state
+    last_state_ns: int | None = None  # time of the newest frame that got a state (an update or a start)
+    closing: tuple[int, int, F64] | None = None  # (index, t_ns, IMU prediction) of the update to come
     consistent: bool = False  # the newest smoothed pose passed the consistency checks
     solver_failures: int = 0  # consecutive updates the solver failed
     drift_failing_since_ns: int | None = None  # the scale or bias checks fail from then on
     init_kind: str = ""
 
-    def set(self, index: int, t_ns: int, T_world_body: SE3, bridged: bool = False) -> None:
+    def set(self, index: int, t_ns: int, T_world_body: SE3, bridged: bool = False,
+            predicted: SE3 | None = None) -> None:
+        """The pose of frame ``index``: ``bridged``, the IMU's prediction; otherwise a state, of an
+        update (``predicted``: the IMU's prediction of the same frame from the newest state before
+        it; :meth:`update` follows) or of a start."""
         self.index_of[t_ns] = index
         self.poses[index] = T_world_body.matrix()
         if bridged:
             self.bridged.add(index)
+            self.gap.append((index, t_ns))
+        elif predicted is None:
+            self.gap.clear()
+            self.last_state_ns = t_ns
+        else:
+            self.closing = (index, t_ns, predicted.matrix())
+
+    def _close_gap(self, before: dict[int, F64]) -> None:
+        """Spread the update's correction of the IMU prediction over the bridged frames since the
+        last state, linearly in time (``before``: the anchors' poses before the update). The
+        prediction through a gap drifts from nothing at its start to what the update measures at
+        its end; left alone, the bridged frames kept all of that drift and none of the update. A
+        bridged frame at the fraction w of the gap moves by w of the correction in position and
+        turns by w of it in rotation, after moving with its keyframe (which the update may
+        move too; the prediction is taken along with it)."""
+        if self.closing is None:
+            return
+        index, t_ns, T_pred = self.closing
+        t0 = self.last_state_ns
+        self.closing = None
+        if not self.gap or t0 is None or t_ns <= t0:
+            return
+        anchor = next((kf for kf, frames in self.anchored.items() if any(j == self.gap[-1][0] for j, _ in frames)),
+                      None)
+        if anchor is not None and anchor in before:
+            T_pred = self.poses[anchor] @ se3_matrix_inverse(before[anchor]) @ T_pred
+        T_upd = self.poses[index]
+        dp = T_upd[:3, 3] - T_pred[:3, 3]
+        dw = so3_log(T_upd[:3, :3] @ T_pred[:3, :3].T)
+        moved: dict[int, F64] = {}
+        for i, t in self.gap:
+            w = (t - t0) / (t_ns - t0)
+            T = self.poses[i].copy()
+            T[:3, :3] = so3_exp(w * dw) @ T[:3, :3]
+            T[:3, 3] = T[:3, 3] + w * dp
+            self.poses[i] = moved[i] = T
+        for kf, frames in self.anchored.items():  # they move with their keyframe from the new pose on
+            inv = se3_matrix_inverse(self.poses[kf])
+            frames[:] = [(j, inv @ moved[j] if j in moved else rel) for j, rel in frames]
 
     def restart_due(self, checks: ConsistencyReport, after_s: float | None) -> bool:
         """Whether the checks of a keyframe re-initialise the smoother (``after_s`` None: never).
@@ -222,6 +268,7 @@ class BodyTrack:
         window's position and yaw of its own time, which later updates move (they are not
         observable): on forward-stop-turn, the poses of non-keyframes were 4-5 cm from those of
         their neighbouring keyframes in the final trajectory."""
+        before = {kf: self.poses[kf].copy() for kf in self.anchored} if self.closing is not None else {}
         in_window: set[int] = set()
         keyframe: int | None = None
         newest_is_kf = False
@@ -244,6 +291,11 @@ class BodyTrack:
             for j, rel in self.anchored[kf]:
                 if j not in in_window:
                     self.poses[j] = self.poses[kf] @ rel
+        if self.closing is not None and self.closing[0] == newest:
+            t_ns = self.closing[1]
+            self._close_gap(before)
+            self.gap.clear()
+            self.last_state_ns = t_ns
 
 
 class VioPhase(Enum):

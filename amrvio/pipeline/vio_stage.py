@@ -167,9 +167,8 @@ class VioStage:
         sigma_zv = self.cfg.zero_velocity.sigma_m_s
         body_v = (np.zeros(3), sigma_zv) if zv.still and sigma_zv > 0 else self._wheel_velocity(inp.t_ns)
         res = self.backend.add_frame(inp.t_ns, imu, obs, body_v)
-        est = res.estimate
+        est, pred = res.estimate, res.predicted
         if not est.ok or est.state is None:
-            pred = res.predicted
             if pred is None:  # the IMU does not cover the frame: back to the VO until a new init
                 events.append(f"vio_failed:{est.status.value}")
                 self.vo_keyframes.clear()
@@ -207,7 +206,7 @@ class VioStage:
             restart = self._reinit(base, obs, imu, NO_LANDMARKS if suspect else landmarks)
             return VioReport(VioPhase.VIO, restart, res.keyframe, last_init=self.last_init, checks=res.checks,
                              init_kind=self.track.init_kind, zero_velocity=zv)
-        self.track.set(index, inp.t_ns, est.state.T_world_body)
+        self.track.set(index, inp.t_ns, est.state.T_world_body, predicted=None if pred is None else pred.T_world_body)
         self.track.update(self.backend.window(), index)
         return VioReport(VioPhase.VIO, est, res.keyframe, last_init=self.last_init, checks=res.checks,
                          init_kind=self.track.init_kind, zero_velocity=zv)
