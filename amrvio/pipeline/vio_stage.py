@@ -12,7 +12,8 @@ KLT tracks (ids and undistorted pixels) and the VO keyframe the frame became, if
    report goes into the record; once it is OK the smoother starts at the newest keyframe, in the
    gravity-aligned metric world, with the map's points it sees as landmarks;
 3. then every frame's tracks go to :meth:`VioBackend.add_frame`; a frame that is blurred, dropped,
-   repeated or lost gets an IMU prediction (``propagate(..., bridged=True)``); a frame at
+   repeated or lost gets an IMU prediction (``propagate(..., bridged=True)``), which the next
+   update corrects, spread over the gap (:meth:`BodyTrack.set`); a frame at
    standstill (the tracks and the IMU both say so, :mod:`amrvio.pipeline.zero_velocity`) adds
    ``v = 0`` to its update, which stops the velocity drifting while the platform stands;
 4. a failed consistency check re-initialises the smoother at its own IMU prediction (logged as a
