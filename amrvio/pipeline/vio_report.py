@@ -171,6 +171,7 @@ class StaticStart:
 @dataclass
 class BodyTrack:
     """Per frame index: the body pose ``T_world_body`` (4x4) the stage gives it, and frame times;
+    the frames bridged since the last state (corrected by the next update, :meth:`_close_gap`);
     whether the newest smoothed pose passed its consistency checks, how many updates in a row
     the solver failed, since when the scale or bias-drift checks have been failing, and how the
     running estimate was initialised (``VioReport.init_kind``)."""
@@ -203,30 +204,28 @@ class BodyTrack:
         else:
             self.closing = (index, t_ns, predicted.matrix())
 
-    def _close_gap(self, before: dict[int, F64]) -> None:
-        """Spread the update's correction of the IMU prediction over the bridged frames since the
-        last state, linearly in time (``before``: the anchors' poses before the update). The
-        prediction through a gap drifts from nothing at its start to what the update measures at
-        its end; left alone, the bridged frames kept all of that drift and none of the update. A
-        bridged frame at the fraction w of the gap moves by w of the correction in position and
-        turns by w of it in rotation, after moving with its keyframe (which the update may
-        move too; the prediction is taken along with it)."""
-        if self.closing is None:
+    def _close_gap(self, closing: tuple[int, int, F64], before: dict[int, F64]) -> None:
+        """Spread the update's correction of the IMU prediction (``closing``: the updated frame's
+        index, time and prediction) over the bridged frames since the last state, linearly in time
+        (``before``: the anchors' poses before the update). The prediction through a gap drifts
+        from nothing at its start to what the update measures at its end; left alone, the bridged
+        frames kept all of that drift and none of the update. A bridged frame at the fraction w of
+        the gap moves by w of the correction in position and turns by w of it in rotation, after
+        moving with its keyframe (which the update may move too; the prediction goes with it)."""
+        index, t_ns, T_pred = closing
+        t0, gap = self.last_state_ns, list(self.gap)
+        self.gap.clear()
+        self.last_state_ns = t_ns
+        if not gap or t0 is None or t_ns <= t0:
             return
-        index, t_ns, T_pred = self.closing
-        t0 = self.last_state_ns
-        self.closing = None
-        if not self.gap or t0 is None or t_ns <= t0:
-            return
-        anchor = next((kf for kf, frames in self.anchored.items() if any(j == self.gap[-1][0] for j, _ in frames)),
-                      None)
+        anchor = next((kf for kf, frames in self.anchored.items() if any(j == gap[-1][0] for j, _ in frames)), None)
         if anchor is not None and anchor in before:
             T_pred = self.poses[anchor] @ se3_matrix_inverse(before[anchor]) @ T_pred
         T_upd = self.poses[index]
         dp = T_upd[:3, 3] - T_pred[:3, 3]
         dw = so3_log(T_upd[:3, :3] @ T_pred[:3, :3].T)
         moved: dict[int, F64] = {}
-        for i, t in self.gap:
+        for i, t in gap:
             w = (t - t0) / (t_ns - t0)
             T = self.poses[i].copy()
             T[:3, :3] = so3_exp(w * dw) @ T[:3, :3]
@@ -291,11 +290,9 @@ class BodyTrack:
             for j, rel in self.anchored[kf]:
                 if j not in in_window:
                     self.poses[j] = self.poses[kf] @ rel
-        if self.closing is not None and self.closing[0] == newest:
-            t_ns = self.closing[1]
-            self._close_gap(before)
-            self.gap.clear()
-            self.last_state_ns = t_ns
+        closing, self.closing = self.closing, None
+        if closing is not None and closing[0] == newest:
+            self._close_gap(closing, before)
 
 
 class VioPhase(Enum):
