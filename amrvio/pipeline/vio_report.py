@@ -198,7 +198,7 @@ class BodyTrack:
         if bridged:
             self.bridged.add(index)
             self.gap.append((index, t_ns))
-        elif predicted is None:
+        elif predicted is None or not self.gap:  # nothing bridged since the last state: nothing to close
             self.gap.clear()
             self.last_state_ns = t_ns
         else:
@@ -216,7 +216,7 @@ class BodyTrack:
         t0, gap = self.last_state_ns, list(self.gap)
         self.gap.clear()
         self.last_state_ns = t_ns
-        if not gap or t0 is None or t_ns <= t0:
+        if t0 is None or t_ns <= t0:
             return
         anchor = next((kf for kf, frames in self.anchored.items() if any(j == gap[-1][0] for j, _ in frames)), None)
         if anchor is not None and anchor in before:
