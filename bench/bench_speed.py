@@ -484,6 +484,11 @@ ALTERNATIVES: tuple[tuple[str, dict[str, object]], ...] = (
     ("ba_backend=schur", {"mapping": {"mapper": {"ba_backend": "schur"}}}),
     ("fb_pyr_levels=0", {"tracking": {"klt": {"fb_pyr_levels": 0}}}),
     ("anchor.pyr_levels=0", {"mapping": {"anchor": {"pyr_levels": 0}}}),
+    # the front-end's size: fewer tracks, or a smaller KLT window, cost less per frame; these
+    # rows measure what each does to the accuracy (the speed-accuracy frontier of issue 11)
+    ("max_corners=800", {"tracking": {"klt": {"detector": {"max_corners": 800}}}}),
+    ("max_corners=400", {"tracking": {"klt": {"detector": {"max_corners": 400}}}}),
+    ("klt win_size=15", {"tracking": {"klt": {"win_size": 15}}}),
 )
 
 
