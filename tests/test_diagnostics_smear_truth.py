@@ -114,6 +114,35 @@ def test_translational_smear_closed_form() -> None:
     assert np.all(smear_at_pixels(cam, np.eye(3), uv) == 0.0)
 
 
+def _inverse_depth_brute_force(depths: np.ndarray, pts: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The plane fit of ``CameraMotion.inverse_depth_at`` over the 8 nearest points found by
+    sorting every distance (the reference for its k-d tree search)."""
+    inv = 1.0 / depths
+    d = np.sqrt(((q[:, None, :] - pts[None, :, :]) ** 2).sum(axis=2))
+    near = np.argsort(d, axis=1)[:, :8]
+    dist = np.take_along_axis(d, near, axis=1)
+    rho = inv[near]
+    med = np.median(rho[:, :5], axis=1)
+    good = np.abs(rho - med[:, None]) <= 0.5 * med[:, None]
+    w = good / (1.0 + dist / 30.0)
+    out = np.empty(len(q))
+    for i in range(len(q)):
+        A = np.column_stack([np.ones(8), (pts[near[i]] - q[i]) / 100.0])
+        plane = np.linalg.solve(A.T @ (w[i, :, None] * A) + 1e-6 * np.eye(3), A.T @ (w[i] * rho[i]))[0]
+        lo, hi = rho[i][good[i]].min(), rho[i][good[i]].max()
+        out[i] = np.clip(plane, lo, hi) if good[i].sum() >= 3 else med[i]
+    return out
+
+
+def test_inverse_depth_plane_fit_matches_a_brute_force_search() -> None:
+    rng = np.random.default_rng(3)
+    pts = rng.uniform([0, 0], [752, 480], size=(400, 2))
+    depths = 2.0 + 0.004 * pts[:, 0] + rng.uniform(0, 1, 400) ** 4 * 20.0  # a slope, some far outliers
+    q = rng.uniform([-20, -20], [772, 500], size=(300, 2))
+    got = CameraMotion(np.array([0.0, 0.0, 1.0]), depths, pts).inverse_depth_at(q)
+    assert got == pytest.approx(_inverse_depth_brute_force(depths, pts, q), rel=1e-9, abs=1e-12)
+
+
 def test_camera_motion_depth_model_and_bad_input() -> None:
     pts = np.array([[10.0, 10.0], [12.0, 10.0], [11.0, 12.0], [300.0, 200.0], [302.0, 201.0],
                     [305.0, 199.0], [11.0, 9.0]])

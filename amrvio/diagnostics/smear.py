@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from amrvio.errors import ShapeError
 from amrvio.types.camera import CameraModel
@@ -96,12 +97,10 @@ class CameraMotion:
             return np.full(q.shape[0], inv[0])
         p = np.asarray(self.points_px, dtype=np.float64)
         k = min(NEAREST_TRACKS, p.shape[0])
-        d2 = ((q[:, None, :] - p[None, :, :]) ** 2).sum(axis=2)
-        near = np.argpartition(d2, k - 1, axis=1)[:, :k] if k < p.shape[0] else (
-            np.broadcast_to(np.arange(k), (q.shape[0], k)))
-        dist = np.sqrt(np.take_along_axis(d2, near, axis=1))
-        order = np.argsort(dist, axis=1)
-        near, dist = np.take_along_axis(near, order, axis=1), np.take_along_axis(dist, order, axis=1)
+        # the k nearest, nearest first, from a k-d tree: the all-pairs distance matrix and its
+        # partition were 1.4 s of a 22 s run of the 752x480 corridor (698 calls)
+        dist, near = cKDTree(p).query(q, k=k)
+        dist, near = dist.reshape(q.shape[0], k), near.reshape(q.shape[0], k)
         rho = inv[near]
         med = np.median(rho[:, : min(5, k)], axis=1)
         good = np.abs(rho - med[:, None]) <= 0.5 * med[:, None]
