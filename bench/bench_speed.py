@@ -447,6 +447,11 @@ print(json.dumps({"frames": len(out.records), "keyframes": len(out.keyframe_indi
 """
 
 
+# issue 11 asks for memory flat over 1, 5 and 20 min of driving; flat is read as under 10 MiB
+# of growth over the 19 minutes between the shortest and the longest run
+FLAT_MIB_PER_MIN = 0.5
+
+
 def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float) -> list[Row]:
     """Memory of the VO over simulated driving of each length, each run in its own process:
     the resident set's growth over the run (and, in the note, the peak, ru_maxrss); the last
@@ -471,11 +476,15 @@ def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float)
                                  f"{fig['maxrss_mb']:.0f} MiB"})
     if len(minutes) > 1:
         slope = (peaks[-1] - peaks[0]) / (minutes[-1] - minutes[0])
-        rows.append({"name": "speed memory growth per minute of driving", "value": slope,
-                     "unit": "MiB/min",
-                     "note": f"RSS growth between the {minutes[0]:g} and {minutes[-1]:g} min runs; "
-                             "the maps, frame records and relocalisation keyframes are kept for "
-                             "the whole run"})
+        row: Row = {"name": "speed memory growth per minute of driving", "value": slope,
+                    "unit": "MiB/min",
+                    "note": f"RSS growth between the {minutes[0]:g} and {minutes[-1]:g} min runs; "
+                            "the maps, frame records and relocalisation keyframes are kept for "
+                            "the whole run"}
+        if minutes[-1] - minutes[0] >= 10.0:  # judged on the full run's 1-20 min, not the quick one's
+            row.update({"target": f"flat: <= {FLAT_MIB_PER_MIN:g} MiB per minute",
+                        "pass": slope <= FLAT_MIB_PER_MIN})
+        rows.append(row)
     return rows
 
 
