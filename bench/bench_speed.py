@@ -20,9 +20,9 @@ EuRoC V1_01 flight with its recorded IMU at 752x480 and 20 Hz (30 s; 10 s in ``-
 body poses scored (SE3 ATE, scale) against the flight's ground truth. Also written: a cProfile summary of one
 KITTI run (bench/results/speed_profile.txt), the local BA's two solvers on the BA problems of
 that run, whether GTSAM's optimize() holds the GIL, settings that make a stage cheaper (measured,
-not adopted), and the peak memory of runs over simulated driving of increasing length (0.5, 1, 2
-minutes at 320x240 and 5 fps: longer runs take too long on the 2 shared cores), each in its own
-process.
+not adopted), and the memory of runs over simulated driving of increasing length (1, 5 and 20
+minutes at 320x240 and 5 fps, as issue 11 asks; 0.25 and 0.5 min in ``--quick``), each in its own
+process: the resident set's growth over each run and the growth per minute between them.
 
 Run alone: ``.venv/bin/python -m bench.bench_speed [--quick]``.
 """
