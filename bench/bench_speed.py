@@ -431,6 +431,8 @@ def gil_row(problem: BAProblem) -> Row:
 # ------------------------------------------------------------------ peak memory
 _MEM_CHILD = """
 import json, os, resource, sys
+from amrvio.cli.reproducible import make_reproducible
+make_reproducible("run")  # a fixed memory layout, as `amrvio run` has: the same keyframes each time
 from amrvio.io.dataset import open_dataset
 from amrvio.pipeline.run import run_pipeline
 from amrvio.pipeline.threads import limit_native_threads

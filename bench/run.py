@@ -41,7 +41,7 @@ def _modules(only: list[str] | None) -> list[str]:
 
 
 def machine() -> str:
-    """One line: CPU, cores, OS, Python."""
+    """One line: CPU, cores, OS, Python (and the OpenBLAS kernels when they are pinned)."""
     cpu = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -50,8 +50,9 @@ def machine() -> str:
                 break
     except OSError:
         pass
+    blas = os.environ.get("OPENBLAS_CORETYPE")
     return (f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, "
-            f"Python {sys.version.split()[0]}")
+            f"Python {sys.version.split()[0]}" + (f", OpenBLAS {blas} kernels" if blas else ""))
 
 
 def _load(path: Path) -> dict[str, Any]:
@@ -169,4 +170,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
+    from amrvio.cli.reproducible import make_reproducible
+
+    make_reproducible("run")  # the figures `amrvio run` gives, whatever the x86-64 processor
     sys.exit(main())

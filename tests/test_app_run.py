@@ -42,9 +42,25 @@ HEIGHT = 1.2  # any height: it only sets the metric scale source
 _KERNEL_ENV = ("OPENBLAS_", "OMP_", "MKL_", "NPY_")
 
 
+def _blas_kernels() -> str | None:
+    """The kernels this process's OpenBLAS runs (threadpoolctl's "architecture", e.g. SkylakeX)."""
+    import numpy  # noqa: F401  (loads its OpenBLAS)
+    from threadpoolctl import threadpool_info
+
+    names = [str(i["architecture"]) for i in threadpool_info()
+             if i.get("internal_api") == "openblas" and i.get("architecture")]
+    return names[0] if names else None
+
+
 def _amrvio(*args: str | Path) -> subprocess.CompletedProcess[str]:
     env = {"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"}
     env.update({k: v for k, v in os.environ.items() if k.startswith(_KERNEL_ENV)})
+    # `amrvio run` pins OpenBLAS to its AVX2 kernels unless told otherwise (amrvio.cli.reproducible);
+    # the Python API that test_python_api_gives_the_cli_run compares with runs in this process,
+    # with the kernels OpenBLAS chose for this CPU: the CLI gets the same ones
+    kernels = _blas_kernels()
+    if kernels is not None:
+        env.setdefault("OPENBLAS_CORETYPE", kernels)
     return subprocess.run([sys.executable, "-m", "amrvio.cli.main", *map(str, args)],
                           capture_output=True, text=True, check=False, cwd=REPO, env=env)
 

@@ -252,13 +252,15 @@ Progress = Callable[[int, int, Row], None]
 def run_local(recs: Sequence[Recording], out_root: Path, options: BatchOptions, jobs: int,
               progress: Progress | None = None) -> list[Row]:
     """The recordings on a pool of ``jobs`` worker processes (spawned: no state shared with
-    this process); rows in the order of ``recs``."""
+    this process), each recording in a fresh worker: a worker's memory layout then does not
+    depend on which recordings it ran before, so a recording's outputs do not depend on the
+    scheduling (amrvio.cli.reproducible); rows in the order of ``recs``."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     rows: dict[int, Row] = {}
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=max(1, jobs), mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=max(1, jobs), mp_context=ctx, max_tasks_per_child=1) as pool:
         futures = {pool.submit(run_recording, r, str(out_root), options): i
                    for i, r in enumerate(recs)}
         try:

@@ -121,5 +121,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     return rc
 
 
-if __name__ == "__main__":
+def entry() -> NoReturn:
+    """The ``amrvio`` console script: ``run`` and ``batch`` first make the process reproducible
+    (:mod:`amrvio.cli.reproducible`: it may start the command again), then :func:`main`."""
+    from amrvio.cli.reproducible import make_reproducible
+
+    if len(sys.argv) > 1:
+        make_reproducible(sys.argv[1])
     sys.exit(main())
+
+
+if __name__ == "__main__":
+    entry()
