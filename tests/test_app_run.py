@@ -72,8 +72,10 @@ def run_dir(tiny_sim: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     r = _amrvio("run", tiny_sim, "--out", out, "--camera-height", str(HEIGHT), "--bag-out",
                 root / "odom_bag")
     assert r.returncode == 0, r.stderr
-    # stderr is not a terminal and --progress is not given: no progress bar, nothing at all
-    assert r.stderr == "", r.stderr
+    # stderr is not a terminal and --progress is not given: no progress bar, nothing at all, but
+    # the one line a kernel that refuses the reproducible restart causes (amrvio.cli.reproducible)
+    lines = r.stderr.splitlines()
+    assert lines == [] or (len(lines) == 1 and lines[0].endswith("the outputs may differ from run to run")), r.stderr
     assert f"report: {out / 'report.html'}" in r.stdout
     return out
 
