@@ -22,7 +22,10 @@ KITTI run (bench/results/speed_profile.txt), the local BA's two solvers on the B
 that run, whether GTSAM's optimize() holds the GIL, settings that make a stage cheaper (measured,
 not adopted), and the memory of runs over simulated driving of increasing length (1, 5 and 20
 minutes at 320x240 and 5 fps, as issue 11 asks; 0.25 and 0.5 min in ``--quick``), each in its own
-process: the resident set's growth over each run and the growth per minute between them.
+process: the resident set's growth over each run and the growth per minute between them, split
+into what the run freed at its end (its maps, relocalisation database and smoother: the memory
+glibc's ``malloc_trim`` returns once the run is over) and what the output it returns holds (what
+``malloc_trim`` returns further once the output is dropped).
 
 Run alone: ``.venv/bin/python -m bench.bench_speed [--quick]``.
 """
@@ -430,7 +433,7 @@ def gil_row(problem: BAProblem) -> Row:
 
 # ------------------------------------------------------------------ peak memory
 _MEM_CHILD = """
-import json, os, resource, sys
+import ctypes, gc, json, os, resource, sys
 from amrvio.cli.reproducible import make_reproducible
 make_reproducible("run")  # a fixed memory layout, as `amrvio run` has: the same keyframes each time
 from amrvio.io.dataset import open_dataset
@@ -439,12 +442,22 @@ from amrvio.pipeline.threads import limit_native_threads
 def rss_mb():
     with open("/proc/self/statm") as fh:
         return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+def trimmed_mb():  # the resident set once glibc has returned the free heap pages (NaN elsewhere)
+    gc.collect()
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        return float("nan")
+    return rss_mb()
 limit_native_threads(1)
 ds = open_dataset(sys.argv[1])
 before = rss_mb()
 out = run_pipeline(ds)
-print(json.dumps({"frames": len(out.records), "keyframes": len(out.keyframe_indices),
-                  "rss_before_mb": before, "rss_after_mb": rss_mb(),
+after, frames, kfs = rss_mb(), len(out.records), len(out.keyframe_indices)
+with_output = trimmed_mb()
+del out
+print(json.dumps({"frames": frames, "keyframes": kfs, "rss_before_mb": before, "rss_after_mb": after,
+                  "rss_trimmed_mb": with_output, "rss_without_output_mb": trimmed_mb(),
                   "maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
 """
 
@@ -460,6 +473,7 @@ def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float)
     row is the growth per minute between the shortest and the longest run."""
     rows: list[Row] = []
     peaks: list[float] = []
+    parts: list[tuple[float, float]] = []  # (freed at the end, kept in the output) MiB per run
     with tempfile.TemporaryDirectory() as td:
         for mins in minutes:
             seq = sim_corridor(Path(td) / f"m{mins:g}", 60.0 * mins, width, height, fps,
@@ -469,13 +483,19 @@ def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float)
             fig = json.loads(res.stdout.strip().splitlines()[-1])
             grown = float(fig["rss_after_mb"]) - float(fig["rss_before_mb"])
             peaks.append(grown)
+            freed = float(fig["rss_after_mb"]) - float(fig["rss_trimmed_mb"])
+            kept = float(fig["rss_trimmed_mb"]) - float(fig["rss_without_output_mb"])
+            parts.append((freed, kept))
             rows.append({"name": f"speed memory {mins:g} min driving, RSS growth over the run",
                          "value": grown, "unit": "MiB",
                          "note": f"{fig['frames']} frames, {fig['keyframes']} keyframes, corridor "
                                  f"{width}x{height} at {fps:g} fps, own process; resident set "
                                  f"{fig['rss_before_mb']:.0f} MiB before the run (libraries "
                                  f"loaded), {fig['rss_after_mb']:.0f} MiB after; peak (ru_maxrss) "
-                                 f"{fig['maxrss_mb']:.0f} MiB"})
+                                 f"{fig['maxrss_mb']:.0f} MiB; of the growth, {freed:.0f} MiB is heap the "
+                                 f"run freed (its maps, relocalisation database, smoother: glibc's "
+                                 f"malloc_trim returns it) and {kept:.0f} MiB the output it returns "
+                                 f"(the frame records)"})
     if len(minutes) > 1:
         slope = (peaks[-1] - peaks[0]) / (minutes[-1] - minutes[0])
         row: Row = {"name": "speed memory growth per minute of driving", "value": slope,
@@ -487,6 +507,15 @@ def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float)
             row.update({"target": f"flat: <= {FLAT_MIB_PER_MIN:g} MiB per minute",
                         "pass": slope <= FLAT_MIB_PER_MIN})
         rows.append(row)
+        span = minutes[-1] - minutes[0]
+        for k, what in enumerate(("the run's state, freed at its end (maps, relocalisation database, "
+                                  "smoother)", "the output it returns (frame records)")):
+            rows.append({"name": f"speed memory growth per minute of driving: {what.split(' (')[0]}",
+                         "value": (parts[-1][k] - parts[0][k]) / span, "unit": "MiB/min",
+                         "note": f"{what}: resident memory that malloc_trim returns after the run, "
+                                 f"{'while its output is held' if k == 0 else 'further, once the output is dropped'}; "
+                                 f"{parts[0][k]:.0f} MiB after {minutes[0]:g} min, {parts[-1][k]:.0f} MiB "
+                                 f"after {minutes[-1]:g} min"})
     return rows
 
 
