@@ -468,9 +468,10 @@ FLAT_MIB_PER_MIN = 0.5
 
 
 def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float) -> list[Row]:
-    """Memory of the VO over simulated driving of each length, each run in its own process:
-    the resident set's growth over the run (and, in the note, the peak, ru_maxrss); the last
-    row is the growth per minute between the shortest and the longest run."""
+    """Memory of the pipeline (the VIO too: the corridor has an IMU) over simulated driving of
+    each length, each run in its own process: the resident set's growth over the run (and, in
+    the note, the peak, ru_maxrss, and the growth's two parts, the run's state and its output);
+    then the growth per minute between the shortest and the longest run, and of each part."""
     rows: list[Row] = []
     peaks: list[float] = []
     parts: list[tuple[float, float]] = []  # (freed at the end, kept in the output) MiB per run
