@@ -498,25 +498,25 @@ def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float)
                                  f"malloc_trim returns it) and {kept:.0f} MiB the output it returns "
                                  f"(the frame records)"})
     if len(minutes) > 1:
-        slope = (peaks[-1] - peaks[0]) / (minutes[-1] - minutes[0])
-        row: Row = {"name": "speed memory growth per minute of driving", "value": slope,
-                    "unit": "MiB/min",
+        span = minutes[-1] - minutes[0]
+        slope = (peaks[-1] - peaks[0]) / span
+        row: Row = {"name": "speed memory growth per minute of driving", "value": slope, "unit": "MiB/min",
                     "note": f"RSS growth between the {minutes[0]:g} and {minutes[-1]:g} min runs; "
                             "the maps, frame records and relocalisation keyframes are kept for "
                             "the whole run"}
-        if minutes[-1] - minutes[0] >= 10.0:  # judged on the full run's 1-20 min, not the quick one's
+        if span >= 10.0:  # judged on the full run's 1-20 min, not the quick one's
             row.update({"target": f"flat: <= {FLAT_MIB_PER_MIN:g} MiB per minute",
                         "pass": slope <= FLAT_MIB_PER_MIN})
         rows.append(row)
-        span = minutes[-1] - minutes[0]
-        for k, what in enumerate(("the run's state, freed at its end (maps, relocalisation database, "
-                                  "smoother)", "the output it returns (frame records)")):
-            rows.append({"name": f"speed memory growth per minute of driving: {what.split(' (')[0]}",
+        for k, (part, detail, when) in enumerate((
+                ("the run's state, freed at its end", "maps, relocalisation database, smoother",
+                 "while its output is held"),
+                ("the output it returns", "frame records", "further, once the output is dropped"))):
+            rows.append({"name": f"speed memory growth per minute of driving: {part}",
                          "value": (parts[-1][k] - parts[0][k]) / span, "unit": "MiB/min",
-                         "note": f"{what}: resident memory that malloc_trim returns after the run, "
-                                 f"{'while its output is held' if k == 0 else 'further, once the output is dropped'}; "
-                                 f"{parts[0][k]:.0f} MiB after {minutes[0]:g} min, {parts[-1][k]:.0f} MiB "
-                                 f"after {minutes[-1]:g} min"})
+                         "note": f"{part} ({detail}): resident memory that malloc_trim returns after the run, "
+                                 f"{when}; {parts[0][k]:.0f} MiB after {minutes[0]:g} min, "
+                                 f"{parts[-1][k]:.0f} MiB after {minutes[-1]:g} min"})
     return rows
 
 
