@@ -83,6 +83,7 @@ def test_nested_override_keeps_the_other_defaults() -> None:
     ({"tracking": {"blurred_reference_ratio": -0.5}}, "'tracking.blurred_reference_ratio' must be in [0, 1000]"),
     ({"tracking": {"scaled_relative": {"min_points": 1}}},
      "'tracking.scaled_relative.min_points' must be in [2, 1000000]"),
+    ({"recovery": {"max_keyframes": 0}}, "'recovery.max_keyframes' must be in [1, 1000000]"),
 ])
 def test_bad_keys_and_types_name_the_key(data: dict, message: str) -> None:
     with pytest.raises(ConfigError) as err:

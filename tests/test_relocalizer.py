@@ -20,6 +20,7 @@ from amrvio.estimator.relocalizer import (
 )
 from amrvio.estimator.vo_map import VoMap
 from amrvio.geometry.projection import project
+from amrvio.pipeline.recovery import MapRecovery, RecoveryConfig
 from amrvio.sim.render import SceneRenderer
 from amrvio.sim.scene import make_scene
 from amrvio.tracking.detect import DetectorConfig, detect_corners
@@ -216,6 +217,22 @@ def test_database_add_cap_priority_replace_remove() -> None:
         db.add(1, img, uv, ids[:5])
     with pytest.raises(ConfigError):
         KeyframeDatabase(max_features=0)
+
+
+def test_recovery_keeps_the_newest_keyframes_of_each_map() -> None:
+    img = _texture()
+    rng = np.random.default_rng(8)
+    m = VoMap()
+    for k in range(6):
+        uv = rng.uniform(EDGE_PX, [320 - EDGE_PX, 240 - EDGE_PX], (60, 2))
+        m.add_keyframe(10 * k, np.eye(4), np.arange(100 * k, 100 * k + 60), uv)
+    rec = MapRecovery(np.eye(3), RecoveryConfig(max_keyframes=3), seed=0)
+    for k in range(6):
+        rec.add_keyframe(0, k, img, m)
+        assert [e.kf_id for e in rec.dbs[0].entries()] == list(range(max(0, k - 2), k + 1))
+    rec.add_keyframe(1, 0, img, m)  # another map: its own database
+    assert len(rec.dbs[0]) == 3 and len(rec.dbs[1]) == 1
+    assert sorted(rec.dbs[0].entries()[0].point_ids.tolist())[0] >= 300  # keyframe 3's points
 
 
 # ---------------------------------------------------------------------------------------------

@@ -6,7 +6,7 @@ import numpy as np
 
 from amrvio.estimator.camera_height import HeightEstimate, estimate_height, smooth_scales
 from amrvio.estimator.local_ba import BAProblem, BAStatus, solve_ba_gtsam, solve_ba_scipy
-from amrvio.estimator.mapper import Mapper, MapperConfig, TriangulationReport
+from amrvio.estimator.mapper import BAReport, Mapper, MapperConfig, TriangulationReport
 from amrvio.geometry.ground_plane import PlaneStatus
 from amrvio.geometry.projection import project
 from amrvio.types.lie import SE3, se3_matrix
@@ -185,3 +185,28 @@ def test_triangulate_new_counts_candidates_and_rejections_by_cause() -> None:
     made = mp.map.points_of(ids[:n])
     assert made[:n_good].all() and not made[n_good:].any()
     np.testing.assert_allclose(mp.map.xyz[:n_good], P[:n_good], rtol=1e-8)
+
+
+def test_retired_keyframe_tracks_do_not_change_the_local_ba() -> None:
+    """Tracks dropped from the keyframes that left the BA window (the memory bound of a long
+    run) leave the BA's result exactly as it was; one keyframe fewer kept, and it changes."""
+    cfg = MapperConfig(ba_window=2, ba_fixed=1)
+
+    def ba(keep_last: int | None) -> tuple[BAReport, np.ndarray, np.ndarray]:
+        mp0, _ = _mapper_with_window(0.3)
+        mp = Mapper(K, cfg)
+        mp.map = mp0.map
+        if keep_last is not None:
+            mp.map.retire_tracks(keep_last)
+        rep = mp.local_ba()
+        return rep, np.stack([k.T_cam_world for k in mp.map.keyframes]), mp.map.xyz.copy()
+
+    rep0, T0, X0 = ba(None)
+    rep1, T1, X1 = ba(3)
+    assert rep0 == rep1 and np.array_equal(T0, T1) and np.array_equal(X0, X1)
+    rep2, _, _ = ba(2)
+    assert rep2.n_keyframes == 2 and rep2.n_observations < rep0.n_observations
+    m = _mapper_with_window(0.3)[0].map
+    m.retire_tracks(3)
+    m.retire_tracks(4)  # never restores what is gone
+    assert [len(k.track_ids) for k in m.keyframes] == [0, 0, 150, 150, 150] and m.n_retired == 2

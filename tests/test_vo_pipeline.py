@@ -3,6 +3,9 @@ determinism, and the typed statuses."""
 
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -10,6 +13,7 @@ from skimage import data as skdata
 
 from amrvio.config import PipelineConfig
 from amrvio.pipeline.pipeline import Pipeline
+from amrvio.pipeline.record_log import RecordLog
 from amrvio.pipeline.records import PoseStatus
 from amrvio.types.lie import se3_matrix as rt_to_T
 from amrvio.types.lie import se3_matrix_inverse as invert_T
@@ -142,3 +146,42 @@ def test_vo_blurred_frames_are_not_keyframes_and_exposure_step_keeps_tracking(
     assert abs(tr28.brightness_a - 1.6) < 0.1
     path = float(np.sum(np.linalg.norm(np.diff(gt[:, :3, 3], axis=0), axis=1)))
     assert _sim3_ate(out.T_world_cam[:, :3, 3], gt[:, :3, 3]) < 0.01 * path
+
+
+def test_run_memory_is_bounded_records_on_disk_and_old_tracks_dropped(
+        seq: tuple[list[np.ndarray], np.ndarray], tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    imgs, _ = seq
+    cfg = PipelineConfig()
+    vo = Pipeline(K, cfg)
+    online = [vo.process(im, i * 50_000_000) for i, im in enumerate(imgs)]
+    out = vo.finish()
+    # the records: every frame once, in order, the online record with its final status and pose
+    assert isinstance(out.records, RecordLog) and len(out.records) == len(imgs)
+    assert [r.index for r in out.records] == list(range(len(imgs)))
+    assert np.array_equal(out.stamps_ns, [r.t_ns for r in online])
+    for a, b in zip(online, out.records, strict=True):
+        assert (a.events, a.blur, a.tracking, a.estimator) == (b.events, b.blur, b.tracking, b.estimator)
+        assert b.pose_refined is not None and np.array_equal(b.pose_refined.matrix(), out.T_world_cam[b.index])
+    # read back from the file: the newest two in memory, the rest unpickled, equal to what was written
+    log = RecordLog(online, keep=2)
+    assert log == online and log[-1] is online[-1] and log[0] is not online[0]
+    assert log != [*online[:-1], dataclasses.replace(online[-1], events=("x",))] and log != online[1:]
+    assert [r.index for r in log[3:9:2]] == [3, 5, 7] and log[-len(online)].index == 0
+    with pytest.raises(IndexError):
+        log[len(online)]
+    log.close()
+    assert log[-1] is online[-1]  # kept in memory
+    with pytest.raises(ValueError, match="closed file"):
+        log[0]
+    # no writable temporary folder: the same records, kept in memory
+    held = RecordLog(online, keep=2, directory=str(tmp_path / "missing"))
+    assert held == online and "in memory" in caplog.text
+    # the keyframes that left the BA window keep their pose and drop their tracks
+    mcfg = cfg.mapping.mapper
+    kfs = vo.mapping.current.mapper.map.keyframes
+    window = mcfg.ba_window + mcfg.ba_fixed
+    assert len(kfs) > window + 2
+    assert all(len(k.track_ids) == 0 and k.uv.shape == (0, 2) for k in kfs[:-window])
+    assert all(len(k.track_ids) > 50 and len(k.uv) == len(k.track_ids) for k in kfs[-window:])
+    kf_frames = [k.frame_index for k in kfs]
+    assert np.all(np.isfinite(out.T_world_cam[kf_frames]))

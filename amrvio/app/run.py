@@ -16,7 +16,7 @@ For images of your own, feed :class:`amrvio.pipeline.pipeline.Pipeline` frame by
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -56,7 +56,7 @@ class RunResult:
     out_dir: Path | None
 
     @property
-    def records(self) -> tuple[FrameRecord, ...]:
+    def records(self) -> Sequence[FrameRecord]:
         return self.output.records
 
     @property

@@ -124,11 +124,15 @@ class LocalMapping:
                                                                         tri, ba)
 
     def seal_keyframe(self, kf_id: int, img: U8, tracks: TrackSet) -> None:
-        """Record the keyframe's final observations (after detection added tracks) and keep its
-        image while some track is anchored in it."""
-        kf = self.current.mapper.map.keyframes[kf_id]
+        """Record the keyframe's final observations (after detection added tracks), keep its
+        image while some track is anchored in it, and drop the tracks of the keyframes that have
+        left the BA window (:meth:`VoMap.retire_tracks`)."""
+        m = self.current.mapper.map
+        kf = m.keyframes[kf_id]
         kf.track_ids = tracks.ids.copy()
         kf.uv = tracks.pts.copy()
+        # the next BA window is the newest ba_window + ba_fixed keyframes: older tracks are done
+        m.retire_tracks(self.cfg.mapper.ba_window + self.cfg.mapper.ba_fixed)
         self.kf_images[kf_id] = AnchorImage.of(img)
         used = {int(k) for k in np.unique(tracks.first_kf)}
         for key in list(self.kf_images):

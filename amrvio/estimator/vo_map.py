@@ -17,7 +17,8 @@ I64 = NDArray[np.int64]
 @dataclass(slots=True)
 class Keyframe:
     """A keyframe: frame index, ``T_cam_world`` (4x4, updated by BA), and the tracks it saw:
-    ``track_ids`` (M,) with their (M, 2) pinhole pixel positions ``uv``."""
+    ``track_ids`` (M,) with their (M, 2) pinhole pixel positions ``uv`` (empty once the keyframe
+    has left the BA window: :meth:`VoMap.retire_tracks`)."""
 
     kf_id: int
     frame_index: int
@@ -33,6 +34,7 @@ class VoMap:
     keyframes: list[Keyframe] = field(default_factory=list)
     xyz: F64 = field(default_factory=lambda: np.zeros((0, 3)))
     has_point: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    n_retired: int = 0  # the oldest keyframes whose tracks were dropped (:meth:`retire_tracks`)
 
     def ensure_capacity(self, n_tracks: int) -> None:
         """Grow the per-track arrays to hold track ids < ``n_tracks``."""
@@ -68,6 +70,16 @@ class VoMap:
 
     def set_pose(self, kf_id: int, T_cam_world: F64) -> None:
         self.keyframes[kf_id].T_cam_world = T_cam_world.copy()
+
+    def retire_tracks(self, keep_last: int) -> None:
+        """Drop the tracks of all but the newest ``keep_last`` keyframes; their poses stay. The
+        local BA window is the only reader of an older keyframe's tracks, so with ``keep_last``
+        at least its size nothing changes but the memory, which then stays bounded."""
+        end = max(len(self.keyframes) - keep_last, 0)
+        for kf in self.keyframes[self.n_retired:end]:
+            kf.track_ids = np.zeros(0, dtype=np.int64)
+            kf.uv = np.zeros((0, 2))
+        self.n_retired = max(self.n_retired, end)
 
     def all_points(self) -> tuple[I64, F64]:
         ids = np.flatnonzero(self.has_point).astype(np.int64)

@@ -4,7 +4,7 @@ local BA) -> scale sources (camera height) -> VioStage (with an IMU) -> Trajecto
 
 ``Pipeline.process(image, t_ns)`` returns the frame's :class:`FrameRecord`; ``finish()`` composes
 the refined trajectory and returns every record with its final pose. The pipeline wires the
-stages and owns the records; each stage owns its own state.
+stages and owns the records (a :class:`RecordLog`); each stage owns its own state.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from amrvio.frontend.keyframe_policy import KeyframeReason
 from amrvio.frontend.tracker import Tracker
 from amrvio.frontend.tracking_types import Observations, TrackingReport, TrackOutcome
 from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer, to_se3
+from amrvio.pipeline.record_log import RecordLog
 from amrvio.pipeline.records import EstimatorReport, FrameRecord, PipelineOutput, PoseStatus, reference_time
 from amrvio.pipeline.recovery import MapRecovery, implausible_jump, link_to_previous
 from amrvio.pipeline.smear_motion import ROUGH_POSES, with_translation
@@ -81,7 +82,7 @@ class Pipeline:
         vio = VioStage(cfg.vio, K, imu, self.mapping) if vio_on and imu is not None else None
         self.sensors = SensorStages(diagnostics, vio)
         self.blur = BlurScorer(cfg.diagnostics.blur)
-        self.records: list[FrameRecord] = []
+        self.records = RecordLog()
         self.timings: dict[str, float] = {}
 
     def _toc(self, stage: str, t0: float) -> None:
@@ -374,11 +375,10 @@ class Pipeline:
     def finish(self) -> PipelineOutput:
         """Compose the refined trajectory; every record gets its final status and pose."""
         n = len(self.records)
+        stamps = np.fromiter((r.t_ns for r in self.records), dtype=np.int64, count=n)
         if not self.cfg.track:
-            return PipelineOutput(tuple(self.records), np.zeros((0, 4, 4)),
-                                  np.zeros(0, dtype=np.int64), np.zeros((0, 3)), (), np.ones(n),
-                                  self.all_timings())
-        stamps = np.array([r.t_ns for r in self.records], dtype=np.int64)
+            return PipelineOutput(self.records, stamps, np.zeros((0, 4, 4)), np.zeros(0, dtype=np.int64),
+                                  np.zeros((0, 3)), (), np.ones(n), self.all_timings())
         frame_scale = self.scale.frame_scales(n, stamps) if self.scale.active else None
         unscaled = self.composer.finish(self.mapping.segments)  # the VIO puts these in its world, at its scale
         composed = unscaled if frame_scale is None else unscaled.scaled(frame_scale)
@@ -387,12 +387,12 @@ class Pipeline:
         pts = [sg.points_in_world(g_scale) for sg in self.mapping.segments]
         vio, statuses = self.sensors.vio, list(composed.statuses)
         body, statuses = vio.finish(unscaled.T_world_cam, statuses, self.mapping.segments) if vio else (None, statuses)
-        records = tuple(
-            dataclasses.replace(r, status=statuses[i], pose_refined=to_se3(composed.T_world_cam[i]),
-                                segment=self.composer.anchors[i].segment, scale_factor=float(fs[i]))
-            for i, r in enumerate(self.records))
-        kf_idx = np.array([i for i, r in enumerate(records) if r.is_keyframe], dtype=np.int64)
-        return PipelineOutput(records, composed.T_world_cam, kf_idx,
+        kf_idx = np.array([i for i, r in enumerate(self.records) if r.is_keyframe], dtype=np.int64)
+        done, self.records = self.records, RecordLog(dataclasses.replace(
+            r, status=statuses[i], pose_refined=to_se3(composed.T_world_cam[i]),
+            segment=self.composer.anchors[i].segment, scale_factor=float(fs[i])) for i, r in enumerate(self.records))
+        done.close()
+        return PipelineOutput(self.records, stamps, composed.T_world_cam, kf_idx,
                               np.vstack(pts) if pts else np.zeros((0, 3)),
                               tuple(self.scale.readings), fs, self.all_timings(), body)
 

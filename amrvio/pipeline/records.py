@@ -8,6 +8,7 @@ bundle-adjusted keyframes (None for a frame that never got one).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 
@@ -96,13 +97,15 @@ class BodyTrajectory:
 
 @dataclass(frozen=True, slots=True)
 class PipelineOutput:
-    """The run: one record per frame (final poses), (N, 4, 4) ``T_world_cam`` of the refined
-    trajectory, keyframe frame indices, (P, 3) map points, the camera-height readings, the
-    per-frame scale, seconds per stage, the body trajectory of the visual-inertial run (None
+    """The run: one record per frame (final poses; a read-only sequence, kept on disk by
+    :class:`~amrvio.pipeline.record_log.RecordLog`), the (N,) image times (ns), (N, 4, 4)
+    ``T_world_cam`` of the refined trajectory, keyframe frame indices, (P, 3) map points, the
+    camera-height readings, the per-frame scale, seconds per stage, the body trajectory of the visual-inertial run (None
     when it did not run or never initialised), and the wheels' calibration against it (None
     without wheel odometry or body trajectory)."""
 
-    records: tuple[FrameRecord, ...]
+    records: Sequence[FrameRecord]
+    stamps_ns: NDArray[np.int64]
     T_world_cam: F64
     keyframe_indices: NDArray[np.int64]
     map_points: F64
@@ -112,12 +115,8 @@ class PipelineOutput:
     body: BodyTrajectory | None = None
     wheel_calibration: WheelCalibration | None = None
 
-    @property
-    def stamps_ns(self) -> NDArray[np.int64]:
-        return np.array([r.t_ns for r in self.records], dtype=np.int64)
 
-
-def reference_time(records: list[FrameRecord], gap: int) -> int:
+def reference_time(records: Sequence[FrameRecord], gap: int) -> int:
     """The time of the image the tracker tracks from, when the newest of ``records`` is ``gap``
     frames after it: a repeated frame (a recorder's duplicate) shows the image it repeats."""
     k = len(records) - 1 - gap

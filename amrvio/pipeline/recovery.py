@@ -2,8 +2,9 @@
 being tracked (``estimator.relocalizer``), so that the trajectory keeps one map and one scale.
 
 Every keyframe of every segment is described when it is sealed (ORB at its tracked pixels, in
-a per-segment :class:`KeyframeDatabase`). After a loss, each new sharp frame is tried against
-the segment that was lost until it is found again or a new map is initialised.
+a per-segment :class:`KeyframeDatabase` that keeps the newest ``max_keyframes``). After a loss,
+each new sharp frame is tried against the segment that was lost until it is found again or a new
+map is initialised.
 """
 
 from __future__ import annotations
@@ -29,7 +30,9 @@ U8 = NDArray[np.uint8]
 @dataclass(frozen=True, slots=True)
 class RecoveryConfig:
     """``enabled``: try relocalisation after a loss; ``reloc``: its gates; ``max_features``:
-    descriptors kept per keyframe; ``max_bridge_frames``: after this many frames without a
+    descriptors kept per keyframe; ``max_keyframes``: keyframes kept per map, the newest (the
+    oldest is forgotten when one more is sealed: the memory stays bounded on a long run, and the
+    search is for the recent map, not a loop closure); ``max_bridge_frames``: after this many frames without a
     usable image (blurred, dark), the map is searched by appearance before the motion model is
     trusted again; ``link``: placing a new map by the points it shares with the previous one."""
 
@@ -38,6 +41,7 @@ class RecoveryConfig:
     link: LinkConfig = field(default_factory=LinkConfig)
     reloc: RelocConfig = field(default_factory=RelocConfig)
     max_features: int = 1500
+    max_keyframes: int = 300
 
 
 class MapRecovery:
@@ -60,6 +64,8 @@ class MapRecovery:
         db = self.dbs.setdefault(segment, KeyframeDatabase(self.cfg.max_features, self.seed))
         kf = vomap.keyframes[kf_id]
         db.add(kf_id, image, kf.uv, kf.track_ids, priority=vomap.points_of(kf.track_ids))
+        while len(db) > self.cfg.max_keyframes:
+            db.remove(db.entries()[0].kf_id)
         self.timings["reloc_db"] = self.timings.get("reloc_db", 0.0) + time.perf_counter() - t0
 
     def lost(self, segment: int) -> None:

@@ -138,7 +138,7 @@ def diagnose(dataset: Dataset, config: PipelineConfig | None = None, *,
              gyro_bias: str | NDArray[np.float64] = "auto", assumed_ms: float | None = None,
              max_frames: int | None = None, progress: bool = False,
              stop: Callable[[], bool] | None = None,
-             ) -> tuple[tuple[FrameRecord, ...], DiagnosticsSetup]:
+             ) -> tuple[Sequence[FrameRecord], DiagnosticsSetup]:
     """The per-frame health of ``dataset``: the pipeline with tracking off (unusable images
     skipped, ``stop`` as in :func:`run_pipeline`)."""
     cfg = dataclasses.replace(config or PipelineConfig(), track=False, diagnose=True)
