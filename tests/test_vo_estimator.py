@@ -6,10 +6,15 @@ import numpy as np
 
 from amrvio.estimator.camera_height import HeightEstimate, estimate_height, smooth_scales
 from amrvio.estimator.local_ba import BAProblem, BAStatus, solve_ba_gtsam, solve_ba_scipy
+from amrvio.estimator.local_mapping import Segment
 from amrvio.estimator.mapper import BAReport, Mapper, MapperConfig, TriangulationReport
+from amrvio.estimator.vo_map import PointTable
+from amrvio.frontend.tracking_types import Observations
 from amrvio.geometry.ground_plane import PlaneStatus
 from amrvio.geometry.projection import project
-from amrvio.types.lie import SE3, se3_matrix
+from amrvio.pipeline.composer import AnchorKind, PoseAnchor, RefineGates, TrajectoryComposer
+from amrvio.pipeline.records import PoseStatus
+from amrvio.types.lie import SE3, Sim3, se3_matrix
 
 K = np.array([[500.0, 0, 320.0], [0, 500.0, 240.0], [0, 0, 1]])
 
@@ -184,7 +189,7 @@ def test_triangulate_new_counts_candidates_and_rejections_by_cause() -> None:
                                       n_low_parallax=n_far, n_large_reprojection=n_bad)
     made = mp.map.points_of(ids[:n])
     assert made[:n_good].all() and not made[n_good:].any()
-    np.testing.assert_allclose(mp.map.xyz[:n_good], P[:n_good], rtol=1e-8)
+    np.testing.assert_allclose(mp.map.xyz[np.arange(n_good)], P[:n_good], rtol=1e-8)
 
 
 def test_retired_keyframe_tracks_do_not_change_the_local_ba() -> None:
@@ -199,7 +204,7 @@ def test_retired_keyframe_tracks_do_not_change_the_local_ba() -> None:
         if keep_last is not None:
             mp.map.retire_tracks(keep_last)
         rep = mp.local_ba()
-        return rep, np.stack([k.T_cam_world for k in mp.map.keyframes]), mp.map.xyz.copy()
+        return rep, np.stack([k.T_cam_world for k in mp.map.keyframes]), mp.map.all_points()[1]
 
     rep0, T0, X0 = ba(None)
     rep1, T1, X1 = ba(3)
@@ -210,3 +215,78 @@ def test_retired_keyframe_tracks_do_not_change_the_local_ba() -> None:
     m.retire_tracks(3)
     m.retire_tracks(4)  # never restores what is gone
     assert [len(k.track_ids) for k in m.keyframes] == [0, 0, 150, 150, 150] and m.n_retired == 2
+
+
+def test_settled_frames_keep_the_pose_the_end_would_give_them() -> None:
+    """The composer refines, during the run, the frames whose keyframe has left the window, and
+    drops their observations; with the map as it is, the pose is the one the end of the run would
+    compute; what moves in the map afterwards no longer reaches them."""
+    mp, X = _mapper_with_window(0.3)
+    mp.local_ba()
+    seg = Segment(mp, Sim3.identity())
+    rng = np.random.default_rng(4)
+    gates = RefineGates(enabled=True, min_points=10, huber_px=2.0, max_median_px=2.0)
+    anchors = []
+    for k, kf in enumerate(mp.map.keyframes):
+        T_cam_ref = SE3.exp(np.r_[0.02, -0.01, 0.05, 0.001, 0.002, 0.0]).matrix()
+        uv, _ = project(K, T_cam_ref @ kf.T_cam_world, X)
+        obs = Observations(np.arange(len(X), dtype=np.int64), uv + rng.normal(0, 0.3, uv.shape))
+        T_off = SE3.exp(rng.normal(0, 0.003, 6)).matrix()  # the pose tracking gave: a little off
+        anchors.append(PoseAnchor(PoseStatus.TRACKED, AnchorKind.KEYFRAME, 0, k, T_off @ T_cam_ref, obs))
+
+    def composer() -> TrajectoryComposer:
+        c = TrajectoryComposer(K, gates)
+        for a in anchors:
+            c.add(a)
+        return c
+
+    c_end, c_run = composer(), composer()
+    c_run.settle([seg], keep_keyframes=2)  # keyframes 0-2 are 2 or more behind the newest (4)
+    assert [a.kind for a in c_run.anchors] == [AnchorKind.ABSOLUTE] * 3 + [AnchorKind.KEYFRAME] * 2
+    assert all(a.observations is None for a in c_run.anchors[:3]) and c_run.anchors[3].observations is not None
+    T_end = c_end.finish([seg]).T_world_cam
+    assert np.array_equal(c_run.finish([seg]).T_world_cam, T_end)
+    # refined: closer to the truth than the tracked pose it started from
+    for k, kf in enumerate(mp.map.keyframes[:3]):
+        T_true = np.linalg.inv(SE3.exp(np.r_[0.02, -0.01, 0.05, 0.001, 0.002, 0.0]).matrix() @ kf.T_cam_world)
+        T_tracked = np.linalg.inv(anchors[k].T_cam_ref @ kf.T_cam_world)
+        assert np.linalg.norm(T_end[k][:3, 3] - T_true[:3, 3]) < np.linalg.norm(T_tracked[:3, 3] - T_true[:3, 3])
+    # the map moves afterwards: the frames still anchored follow it, the settled ones do not
+    ids = np.arange(len(X))
+    mp.map.xyz[ids] = mp.map.xyz[ids] + np.array([0.2, 0.0, 0.0])
+    T_end2, T_run2 = c_end.finish([seg]).T_world_cam, c_run.finish([seg]).T_world_cam
+    assert not np.allclose(T_end2[:3], T_end[:3], atol=1e-3)
+    assert np.array_equal(T_run2[:3], T_end[:3]) and np.array_equal(T_run2[3:], T_end2[3:])
+
+
+def test_point_table_archive_reads_and_writes_as_a_dict_would() -> None:
+    """PointTable against a plain dict over random writes, removals, reads and archivings; the
+    archive keeps only ids with a point, and its memory is what those points take."""
+    rng = np.random.default_rng(11)
+    table, ref = PointTable(), {}
+    for step in range(300):
+        lo = max(0, 20 * step - 400)
+        ids = np.unique(rng.integers(lo, 20 * step + 40, 30)).astype(np.int64)
+        op = rng.integers(0, 4)
+        if op == 0:
+            X = rng.normal(size=(len(ids), 3))
+            table.set(ids, X, True)
+            ref.update({int(i): (x, True) for i, x in zip(ids, X, strict=True)})
+        elif op == 1:
+            table.set(ids, None, False)
+            ref.update({int(i): (ref[int(i)][0], False) for i in ids if int(i) in ref})
+        elif op == 2:
+            table.archive_below(lo + int(rng.integers(0, 200)))
+        q = np.unique(rng.integers(0, 20 * step + 60, 50)).astype(np.int64)
+        want_has = np.array([int(i) in ref and ref[int(i)][1] for i in q])
+        assert np.array_equal(table.has(q), want_has)
+        got = table[q]
+        for i, row, h in zip(q, got, want_has, strict=True):
+            if h:
+                assert np.array_equal(row, ref[int(i)][0])
+    ids, X = table.all_points()
+    want = sorted(i for i, (_, h) in ref.items() if h)
+    assert ids.tolist() == want and np.array_equal(X, np.array([ref[i][0] for i in want]))
+    assert table.base > 4000  # the archive took the old ids: the dense part is the recent ones
+    n_old = int(np.sum(ids < table.base))
+    assert table.nbytes < (table.end - table.base) * 25 + (n_old + 2000) * 33

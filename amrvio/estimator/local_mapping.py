@@ -79,6 +79,12 @@ class LocalMapping:
         self.timings: dict[str, float] = {}
 
     @property
+    def ba_span(self) -> int:
+        """Keyframes in the local BA window (adjusted and held ones): an older keyframe no
+        longer moves."""
+        return self.cfg.mapper.ba_window + self.cfg.mapper.ba_fixed
+
+    @property
     def current(self) -> Segment:
         if not self.segments:
             raise RuntimeError("LocalMapping: no map segment yet")
@@ -132,7 +138,7 @@ class LocalMapping:
         kf.track_ids = tracks.ids.copy()
         kf.uv = tracks.pts.copy()
         # the next BA window is the newest ba_window + ba_fixed keyframes: older tracks are done
-        m.retire_tracks(self.cfg.mapper.ba_window + self.cfg.mapper.ba_fixed)
+        m.retire_tracks(self.ba_span)
         self.kf_images[kf_id] = AnchorImage.of(img)
         used = {int(k) for k in np.unique(tracks.first_kf)}
         for key in list(self.kf_images):

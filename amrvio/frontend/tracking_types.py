@@ -19,10 +19,17 @@ F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
 
-class Landmarks(Protocol):
-    """What the tracker reads of a map: point positions by track id (``xyz`` (M, 3))."""
+class PointLookup(Protocol):
+    """Points by track id: ``xyz[ids]`` is (N, 3)."""
 
-    xyz: F64
+    def __getitem__(self, ids: I64) -> F64: ...
+
+
+class Landmarks(Protocol):
+    """What the tracker reads of a map: point positions by track id (``xyz[ids]``: (N, 3))."""
+
+    @property
+    def xyz(self) -> PointLookup: ...
 
     def points_of(self, track_ids: I64) -> NDArray[np.bool_]: ...
 

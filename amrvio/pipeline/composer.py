@@ -5,10 +5,15 @@ map segment, an absolute pose (before a map, or a guess), or nothing (to interpo
 the composer reads the bundle-adjusted keyframes, refines non-keyframe poses against the final
 map, resolves frames that share the pose of another (a camera at rest before initialisation),
 interpolates the rest, and applies the per-frame metric scale.
+
+A frame whose keyframe is far behind its map's newest is settled during the run
+(:meth:`TrajectoryComposer.settle`): that keyframe no longer moves, so the frame is refined then
+and keeps one pose instead of its observations. The memory of a long run stays bounded.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from enum import Enum
 
@@ -94,12 +99,33 @@ class TrajectoryComposer:
         self.K = K
         self.gates = gates
         self.anchors: list[PoseAnchor] = []
+        self._settled = 0  # anchors before this one were looked at by :meth:`settle`
 
     def add(self, anchor: PoseAnchor) -> None:
         self.anchors.append(anchor)
 
     def replace(self, index: int, anchor: PoseAnchor) -> None:
         self.anchors[index] = anchor
+
+    def settle(self, segments: list[Segment], keep_keyframes: int) -> None:
+        """Refine now, against the map as it is, the frames tracked relative to a keyframe at
+        least ``keep_keyframes`` behind the newest of the current map (or of an earlier map):
+        each becomes absolute in its segment and drops its observations. With ``keep_keyframes``
+        beyond the local BA window the keyframe's pose is final; the points it sees may still move
+        a little while newer keyframes see them."""
+        while self._settled < len(self.anchors):
+            a = self.anchors[self._settled]
+            if a.kind is AnchorKind.KEYFRAME and a.observations is not None and a.segment is not None \
+                    and a.keyframe is not None:
+                m = segments[a.segment].mapper.map
+                if a.segment == len(segments) - 1 and a.keyframe > len(m.keyframes) - 1 - keep_keyframes:
+                    return
+                T_cw = a.T_cam_ref @ m.keyframes[a.keyframe].T_cam_world
+                if self.gates.enabled:
+                    T_cw = self._refine(m, T_cw, a.observations)
+                self.anchors[self._settled] = dataclasses.replace(
+                    a, kind=AnchorKind.ABSOLUTE, keyframe=None, T_cam_ref=T_cw, observations=None)
+            self._settled += 1
 
     def pose_in_world(self, index: int, segments: list[Segment]) -> F64:
         """4x4 ``T_world_cam`` of an anchored frame with the keyframes as they are now."""

@@ -323,6 +323,7 @@ class Pipeline:
         self.tracker.detect(img, kf.kf_id)
         self.mapping.seal_keyframe(kf.kf_id, img, tracks)
         self.recovery.add_keyframe(len(self.mapping.segments) - 1, kf.kf_id, img, seg.mapper.map)
+        self.composer.settle(self.mapping.segments, 2 * self.mapping.ba_span)  # pose fixed twice the BA window behind
         reading = self.scale.observe_keyframe(seg, kf.kf_id)
         return _Step(self._on_keyframe(T_cw, kf.kf_id, None), T_cw, rep, None, kf, reading)
 
@@ -379,10 +380,9 @@ class Pipeline:
         if not self.cfg.track:
             return PipelineOutput(self.records, stamps, np.zeros((0, 4, 4)), np.zeros(0, dtype=np.int64),
                                   np.zeros((0, 3)), (), np.ones(n), self.all_timings())
-        frame_scale = self.scale.frame_scales(n, stamps) if self.scale.active else None
+        fs = self.scale.frame_scales(n, stamps) if self.scale.active else np.ones(n)
         unscaled = self.composer.finish(self.mapping.segments)  # the VIO puts these in its world, at its scale
-        composed = unscaled if frame_scale is None else unscaled.scaled(frame_scale)
-        fs = frame_scale if frame_scale is not None else np.ones(n)
+        composed = unscaled.scaled(fs) if self.scale.active else unscaled
         g_scale = float(np.median(fs)) if n else 1.0
         pts = [sg.points_in_world(g_scale) for sg in self.mapping.segments]
         vio, statuses = self.sensors.vio, list(composed.statuses)
