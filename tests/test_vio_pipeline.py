@@ -22,6 +22,7 @@ from amrvio.imu.propagation import ImuBias, InertialState
 from amrvio.io.dataset import open_dataset
 from amrvio.io.trajectory import read_trajectory
 from amrvio.pipeline.pipeline import Pipeline
+from amrvio.pipeline.pose_book import PoseBook
 from amrvio.pipeline.records import EstimatorReport, FrameRecord, PoseStatus, reference_time
 from amrvio.pipeline.run_eval import yaw_alignment
 from amrvio.pipeline.vio_report import UNTRACKED, VIO_COLUMNS, BodyTrack, ImuSetup, VioPhase
@@ -447,3 +448,25 @@ def test_the_gyro_predicts_the_klt_after_the_frames_a_yaw_burst_bridged(tmp_path
     t_s = np.array([r.t_ns for r in res.records]) * 1e-9
     al = yaw_alignment(res.output.body.T_world_body[:, :3, 3], gt.interpolated_at(t_s).positions_m)
     assert al["ate_m"] < 0.03, al
+
+
+def test_pose_book_holds_what_a_dict_of_poses_would() -> None:
+    rng = np.random.default_rng(5)
+    book, ref = PoseBook(), {}
+    for _ in range(400):
+        i = int(rng.integers(0, 1500))
+        T = np.eye(4)
+        T[:3, 3] = rng.normal(size=3)
+        book[i] = T
+        ref[i] = T
+    assert len(book) == len(ref) and list(book) == sorted(ref)
+    assert all(np.array_equal(T, ref[i]) for i, T in book.items())
+    assert 3 not in ref or 3 in book
+    assert 1500 not in book and -1 not in book and "x" not in book
+    with pytest.raises(KeyError):
+        book[1501]
+    got = book[min(ref)]
+    got[0, 3] = 99.0  # a copy: the book keeps its pose
+    assert np.array_equal(book[min(ref)], ref[min(ref)])
+    with pytest.raises(KeyError):
+        book[-2] = np.eye(4)

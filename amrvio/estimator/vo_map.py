@@ -16,6 +16,12 @@ F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
 
+_NO_IDS = np.zeros(0, dtype=np.int64)
+_NO_UV = np.zeros((0, 2))
+_NO_IDS.setflags(write=False)
+_NO_UV.setflags(write=False)
+
+
 @dataclass(slots=True)
 class Keyframe:
     """A keyframe: frame index, ``T_cam_world`` (4x4, updated by BA), and the tracks it saw:
@@ -176,8 +182,7 @@ class VoMap:
         the archive once they fill half the dense arrays."""
         end = max(len(self.keyframes) - keep_last, 0)
         for kf in self.keyframes[self.n_retired:end]:
-            kf.track_ids = np.zeros(0, dtype=np.int64)
-            kf.uv = np.zeros((0, 2))
+            kf.track_ids, kf.uv = _NO_IDS, _NO_UV
         self.n_retired = max(self.n_retired, end)
         kept = [int(kf.track_ids.min()) for kf in self.keyframes[end:] if len(kf.track_ids)]
         if kept and 2 * (min(kept) - self.xyz.base) >= self.xyz.end - self.xyz.base:

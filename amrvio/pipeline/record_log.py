@@ -20,6 +20,7 @@ import logging
 import math
 import pickle
 import tempfile
+from array import array
 from collections import deque
 from collections.abc import Iterable, Iterator, Sequence
 from typing import IO, overload
@@ -49,7 +50,7 @@ class RecordLog(Sequence[FrameRecord]):
             log.warning("frame records kept in memory: cannot create a file in %s (%s)",
                         directory or tempfile.gettempdir(), exc.strerror or exc)
             self._fh = io.BytesIO()
-        self._spans: list[tuple[int, int]] = []  # (offset, length) of each pickled record
+        self._starts = array("q")  # where each pickled record starts in the file (8 bytes a record)
         self._recent: deque[FrameRecord] = deque(maxlen=keep)
         self._end = 0
         for rec in records:
@@ -59,7 +60,7 @@ class RecordLog(Sequence[FrameRecord]):
         blob = pickle.dumps(rec, protocol=pickle.HIGHEST_PROTOCOL)
         self._fh.seek(self._end)
         self._fh.write(blob)
-        self._spans.append((self._end, len(blob)))
+        self._starts.append(self._end)
         self._end += len(blob)
         self._recent.append(rec)
 
@@ -68,15 +69,15 @@ class RecordLog(Sequence[FrameRecord]):
         self._fh.close()
 
     def __len__(self) -> int:
-        return len(self._spans)
+        return len(self._starts)
 
     def _load(self, i: int) -> FrameRecord:
-        n_old = len(self._spans) - len(self._recent)
+        n_old = len(self._starts) - len(self._recent)
         if i >= n_old:
             return self._recent[i - n_old]
-        off, size = self._spans[i]
+        off = self._starts[i]
         self._fh.seek(off)
-        rec = pickle.loads(self._fh.read(size))
+        rec = pickle.loads(self._fh.read(self._starts[i + 1] - off))  # an old record is never the last
         if not isinstance(rec, FrameRecord):
             raise TypeError(f"RecordLog: entry {i} is a {type(rec).__name__}, not a FrameRecord")
         return rec
@@ -90,14 +91,14 @@ class RecordLog(Sequence[FrameRecord]):
     def __getitem__(self, i: int | slice) -> FrameRecord | list[FrameRecord]:
         if isinstance(i, slice):
             return [self._load(k) for k in range(*i.indices(len(self)))]
-        n = len(self._spans)
+        n = len(self._starts)
         k = int(i) + n if int(i) < 0 else int(i)
         if not 0 <= k < n:
             raise IndexError(f"RecordLog index {i} out of range for {n} records")
         return self._load(k)
 
     def __iter__(self) -> Iterator[FrameRecord]:
-        for k in range(len(self._spans)):
+        for k in range(len(self._starts)):
             yield self._load(k)
 
     def __eq__(self, other: object) -> bool:

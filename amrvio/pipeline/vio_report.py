@@ -20,6 +20,7 @@ from amrvio.frontend.tracking_types import TrackOutcome
 from amrvio.frontend.tracks import TrackSet
 from amrvio.imu.propagation import InertialState
 from amrvio.imu.static_init import StaticInitResult
+from amrvio.pipeline.pose_book import PoseBook
 from amrvio.pipeline.zero_velocity import ZeroVelocity, ZeroVelocityConfig
 from amrvio.types.lie import SE3, se3_matrix_inverse, so3_exp, so3_log
 from amrvio.types.sensors import ImuData, ImuNoise, WheelData
@@ -176,7 +177,7 @@ class BodyTrack:
     the solver failed, since when the scale or bias-drift checks have been failing, and how the
     running estimate was initialised (``VioReport.init_kind``)."""
 
-    poses: dict[int, F64] = field(default_factory=dict)
+    poses: PoseBook = field(default_factory=PoseBook)
     index_of: dict[int, int] = field(default_factory=dict)
     bridged: set[int] = field(default_factory=set)
     anchored: dict[int, list[tuple[int, F64]]] = field(default_factory=dict)  # keyframe -> (frame, T_kf_frame)
@@ -271,6 +272,9 @@ class BodyTrack:
         in_window: set[int] = set()
         keyframe: int | None = None
         newest_is_kf = False
+        if states:  # the frame times the window no longer holds are not looked up again
+            for t in [t for t in self.index_of if t < states[0][0].t_ns]:
+                del self.index_of[t]
         for st, is_kf in states:
             i = self.index_of.get(st.t_ns)
             if i is not None:
