@@ -23,10 +23,11 @@ that run, whether GTSAM's optimize() holds the GIL, settings that make a stage c
 not adopted), and the memory of runs over simulated driving of increasing length (1, 5 and 20
 minutes at 320x240 and 5 fps, as issue 11 asks; 0.25 and 0.5 min in ``--quick``), each in its own
 process: the peak resident set during each run above its start (Linux's VmHWM, reset once the
-dataset is open) and its growth per minute between them; and the resident set left after the run,
-split into what the run freed at its end (its maps, relocalisation database and smoother: the memory
-glibc's ``malloc_trim`` returns once the run is over) and what the output it returns holds (what
-``malloc_trim`` returns further once the output is dropped).
+dataset is open and the heap it freed returned) and its growth per minute between them; and the
+resident set left after the run, split into what the run freed at its end (its maps,
+relocalisation database and smoother: the memory glibc's ``malloc_trim`` returns once the run is
+over) and what the output it returns holds (what ``malloc_trim`` returns further once the output
+is dropped).
 
 Run alone: ``.venv/bin/python -m bench.bench_speed [--quick]``.
 """
@@ -463,6 +464,7 @@ def trimmed_mb():  # the resident set once glibc has returned the free heap page
     return rss_mb()
 limit_native_threads(1)
 ds = open_dataset(sys.argv[1])
+trimmed_mb()  # the heap opening the dataset freed goes back first: it is not the run's
 before = rss_mb()
 peak_from = reset_peak()
 out = run_pipeline(ds)
@@ -510,9 +512,10 @@ def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float)
                          "note": f"{fig['frames']} frames, {fig['keyframes']} keyframes, corridor "
                                  f"{width}x{height} at {fps:g} fps, own process; resident set "
                                  f"{before:.0f} MiB at the start of the run (libraries loaded, "
-                                 f"dataset open), peak {peak:.0f} MiB during it, {after:.0f} MiB "
-                                 f"after it (the process's peak, ru_maxrss, opening included: "
-                                 f"{fig['maxrss_mb']:.0f} MiB); of the growth after the run, "
+                                 f"dataset open, its freed heap returned), peak {peak:.0f} "
+                                 f"MiB during it, {after:.0f} MiB after it (the process's peak, "
+                                 f"ru_maxrss, opening included: {fig['maxrss_mb']:.0f} MiB); of the "
+                                 f"growth after the run, "
                                  f"{freed:.0f} MiB is heap the run freed (its maps, relocalisation "
                                  f"database, smoother: glibc's malloc_trim returns it) and {kept:.0f} "
                                  f"MiB the output it returns (trajectory, map, records)"})

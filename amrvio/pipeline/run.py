@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.config import PipelineConfig, config_to_dict
-from amrvio.diagnostics.health import health_rows
+from amrvio.diagnostics.health import EXCITATION_COLUMNS, HEALTH_COLUMNS
 from amrvio.errors import DatasetFormatError
 from amrvio.estimator.wheel_calibration import calibrate_wheel
 from amrvio.imu.window import frame_imu_window
@@ -152,30 +152,35 @@ def write_health(path: Path, records: Sequence[FrameRecord],
                  online_status: Sequence[PoseStatus] | None = None) -> None:
     """health.csv: one row per frame, the diagnostics columns (when computed) then the tracking
     columns (when tracked). ``online_status``: each frame's status when it was processed (the
-    online position is left empty for a frame LOST then; default: the final status)."""
-    healths = [r.diagnostics for r in records if r.diagnostics is not None]
-    tracked = any(r.tracking is not None for r in records)
-    cols: list[str] = []
-    rows: list[dict[str, str]] = [{} for _ in records]
-    if len(healths) == len(records) and healths:
-        hcols, hrows = health_rows(healths)
-        cols += hcols
-        for row, h in zip(rows, hrows, strict=True):
-            row.update(h)
+    online position is left empty for a frame LOST then; default: the final status). The rows
+    are written as the records are read (one pass decides the columns, one writes), so the
+    memory does not grow with the recording."""
+    n = n_health = 0
+    tracked = excitation = vio = False
+    for r in records:
+        n += 1
+        n_health += r.diagnostics is not None
+        excitation = excitation or (r.diagnostics is not None and r.diagnostics.excitation is not None)
+        tracked = tracked or r.tracking is not None
+        vio = vio or r.estimator.vio is not None
+    with_health = n_health == n > 0
+    cols = [*HEALTH_COLUMNS, *(EXCITATION_COLUMNS if excitation else ())] if with_health else []
     if tracked:
-        extra = FRAME_COLUMNS if not cols else FRAME_COLUMNS[2:]
-        cols += extra
-        for i, (row, r) in enumerate(zip(rows, records, strict=True)):
-            on = online_status[i] if online_status is not None else None
-            row.update(zip(FRAME_COLUMNS, frame_row(r, on), strict=True))
-            if r.estimator.vio is not None:
-                row.update(r.estimator.vio.health_fields())
-        if any(r.estimator.vio is not None for r in records):
-            cols += VIO_COLUMNS
+        cols += FRAME_COLUMNS if not cols else FRAME_COLUMNS[2:]
+        cols += VIO_COLUMNS if vio else []
     with path.open("w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
         w.writeheader()
-        w.writerows(rows)
+        for i, r in enumerate(records):
+            row: dict[str, str] = {}
+            if with_health and r.diagnostics is not None:
+                row.update(r.diagnostics.as_row())
+            if tracked:
+                on = online_status[i] if online_status is not None else None
+                row.update(zip(FRAME_COLUMNS, frame_row(r, on), strict=True))
+                if r.estimator.vio is not None:
+                    row.update(r.estimator.vio.health_fields())
+            w.writerow(row)
 
 
 FRAME_COLUMNS = ["index", "t_s", "status", "segment", "is_keyframe", "vo_tracks", "n_inliers",
