@@ -257,6 +257,10 @@ def test_settled_frames_keep_the_pose_the_end_would_give_them() -> None:
     T_end2, T_run2 = c_end.finish([seg]).T_world_cam, c_run.finish([seg]).T_world_cam
     assert not np.allclose(T_end2[:3], T_end[:3], atol=1e-3)
     assert np.array_equal(T_run2[:3], T_end[:3]) and np.array_equal(T_run2[3:], T_end2[3:])
+    # a frame re-anchored after it was passed (a new map's initialisation) is settled again
+    c_run.replace(1, anchors[1])
+    c_run.settle([seg], keep_keyframes=2)
+    assert c_run.anchors[1].kind is AnchorKind.ABSOLUTE and c_run.anchors[1].observations is None
 
 
 def test_point_table_archive_reads_and_writes_as_a_dict_would() -> None:

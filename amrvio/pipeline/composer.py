@@ -105,7 +105,10 @@ class TrajectoryComposer:
         self.anchors.append(anchor)
 
     def replace(self, index: int, anchor: PoseAnchor) -> None:
+        """Re-anchor frame ``index`` (a new map's initialisation poses the frames of its history);
+        :meth:`settle` looks at it again."""
         self.anchors[index] = anchor
+        self._settled = min(self._settled, index)
 
     def settle(self, segments: list[Segment], keep_keyframes: int) -> None:
         """Refine now, against the map as it is, the frames tracked relative to a keyframe at
