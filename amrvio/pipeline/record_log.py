@@ -2,11 +2,11 @@
 
 A :class:`RecordLog` is a read-only sequence of :class:`~amrvio.pipeline.records.FrameRecord`
 (index, slice, iterate, ``len``, compare with another sequence). Each record appended is pickled
-into an anonymous temporary file (removed by the system when the log is closed or collected,
-and when the process ends however it ends; in memory, with a warning, where no temporary file
-can be made); the newest ``keep`` records also stay in memory,
-because the pipeline looks back at recent frames. Reading an older record unpickles a copy of
-it: equal to the record appended, not the same object.
+into an anonymous temporary file, which the system removes when the log is closed or collected
+and when the process ends, however it ends. Where no temporary file can be made, the pickles stay
+in memory, with a warning. The newest ``keep`` records also stay in memory, because the pipeline
+looks back at recent frames. Reading an older record unpickles a copy of it: equal to the record
+appended, not the same object.
 
 A record costs some kilobytes in memory (its reports, diagnostics and poses) and about three on
 disk; a long recording holds hundreds of thousands of them.

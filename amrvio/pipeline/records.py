@@ -100,9 +100,9 @@ class PipelineOutput:
     """The run: one record per frame (final poses; a read-only sequence, kept on disk by
     :class:`~amrvio.pipeline.record_log.RecordLog`), the (N,) image times (ns), (N, 4, 4)
     ``T_world_cam`` of the refined trajectory, keyframe frame indices, (P, 3) map points, the
-    camera-height readings, the per-frame scale, seconds per stage, the body trajectory of the visual-inertial run (None
-    when it did not run or never initialised), and the wheels' calibration against it (None
-    without wheel odometry or body trajectory)."""
+    camera-height readings, the per-frame scale, seconds per stage, the body trajectory of the
+    visual-inertial run (None when it did not run or never initialised), and the wheels'
+    calibration against it (None without wheel odometry or body trajectory)."""
 
     records: Sequence[FrameRecord]
     stamps_ns: NDArray[np.int64]
