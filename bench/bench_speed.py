@@ -60,6 +60,7 @@ from amrvio.io.dataset import open_dataset
 from amrvio.pipeline.diagnose import setup_diagnostics
 from amrvio.pipeline.pipeline import PipelineOutput
 from amrvio.pipeline.records import FrameRecord, PoseStatus
+from amrvio.pipeline.recovery import RecoveryConfig
 from amrvio.pipeline.run import run_pipeline
 from amrvio.pipeline.run_output import RunWriter
 from amrvio.pipeline.threads import limit_native_threads
@@ -525,7 +526,8 @@ def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float)
         row: Row = {"name": "speed memory growth per minute of driving", "value": slope, "unit": "MiB/min",
                     "note": f"peak growth during the run, between the {minutes[0]:g} and {minutes[-1]:g} "
                             "min runs; the frame records go to a temporary file as the run goes, "
-                            "the relocalisation database keeps the newest 300 keyframes, the map "
+                            f"the relocalisation database keeps the newest {RecoveryConfig().max_keyframes} "
+                            "keyframes, the map "
                             "keeps the recent tracks' points in full and the older points in an "
                             "archive"}
         if span >= 10.0:  # judged on the full run's 1-20 min, not the quick one's

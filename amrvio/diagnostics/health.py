@@ -136,12 +136,15 @@ EXCITATION_COLUMNS: tuple[str, ...] = (
 )
 
 
+def health_columns(excitation: bool) -> list[str]:
+    """The health columns: :data:`HEALTH_COLUMNS`, then :data:`EXCITATION_COLUMNS` when the
+    records have an excitation part."""
+    return [*HEALTH_COLUMNS, *(EXCITATION_COLUMNS if excitation else ())]
+
+
 def health_rows(records: Sequence[FrameHealth]) -> tuple[list[str], list[Mapping[str, str]]]:
     """Column names (excitation columns only when any record has them) and CSV rows."""
-    cols = list(HEALTH_COLUMNS)
-    if any(r.excitation is not None for r in records):
-        cols += list(EXCITATION_COLUMNS)
-    return cols, [r.as_row() for r in records]
+    return health_columns(any(r.excitation is not None for r in records)), [r.as_row() for r in records]
 
 
 __all__ = [
@@ -151,5 +154,6 @@ __all__ = [
     "ExposureHealth",
     "FrameHealth",
     "ParallaxHealth",
+    "health_columns",
     "health_rows",
 ]

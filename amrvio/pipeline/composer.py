@@ -123,11 +123,9 @@ class TrajectoryComposer:
                 m = segments[a.segment].mapper.map
                 if a.segment == len(segments) - 1 and a.keyframe > len(m.keyframes) - 1 - keep_keyframes:
                     return
-                T_cw = a.T_cam_ref @ m.keyframes[a.keyframe].T_cam_world
-                if self.gates.enabled:
-                    T_cw = self._refine(m, T_cw, a.observations)
                 self.anchors[self._settled] = dataclasses.replace(
-                    a, kind=AnchorKind.ABSOLUTE, keyframe=None, T_cam_ref=T_cw, observations=None)
+                    a, kind=AnchorKind.ABSOLUTE, keyframe=None, T_cam_ref=self._keyframe_pose(a, m),
+                    observations=None)
             self._settled += 1
 
     def pose_in_world(self, index: int, segments: list[Segment]) -> F64:
@@ -152,6 +150,15 @@ class TrajectoryComposer:
             return a.T_cam_ref @ m.keyframes[a.keyframe].T_cam_world
         return a.T_cam_ref if a.kind is AnchorKind.ABSOLUTE else None
 
+    def _keyframe_pose(self, a: PoseAnchor, m: VoMap) -> F64:
+        """4x4 ``T_cam_world`` of a frame anchored to keyframe ``a.keyframe`` of map ``m``, refined
+        against the map's points when it has observations (the same at the end and when settled)."""
+        assert a.keyframe is not None
+        T_cw = a.T_cam_ref @ m.keyframes[a.keyframe].T_cam_world
+        if self.gates.enabled and a.observations is not None:
+            T_cw = self._refine(m, T_cw, a.observations)
+        return T_cw
+
     def _refine(self, m: VoMap, T_cw: F64, obs: Observations) -> F64:
         has = m.points_of(obs.ids)
         if int(has.sum()) < self.gates.min_points:
@@ -175,10 +182,7 @@ class TrajectoryComposer:
                 continue
             sg = segments[a.segment] if a.segment is not None else None
             if a.kind is AnchorKind.KEYFRAME and sg is not None and a.keyframe is not None:
-                m = sg.mapper.map
-                T_cw = a.T_cam_ref @ m.keyframes[a.keyframe].T_cam_world
-                if self.gates.enabled and a.observations is not None:
-                    T_cw = self._refine(m, T_cw, a.observations)
+                T_cw = self._keyframe_pose(a, sg.mapper.map)
             else:
                 T_cw = a.T_cam_ref
             T_wc[i] = sg.pose_in_world(T_cw) if sg is not None else se3_matrix_inverse(T_cw)

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.config import PipelineConfig, config_to_dict
-from amrvio.diagnostics.health import EXCITATION_COLUMNS, HEALTH_COLUMNS
+from amrvio.diagnostics.health import health_columns
 from amrvio.errors import DatasetFormatError
 from amrvio.estimator.wheel_calibration import calibrate_wheel
 from amrvio.imu.window import frame_imu_window
@@ -164,10 +164,7 @@ def write_health(path: Path, records: Sequence[FrameRecord],
         tracked = tracked or r.tracking is not None
         vio = vio or r.estimator.vio is not None
     with_health = n_health == n > 0
-    cols = [*HEALTH_COLUMNS, *(EXCITATION_COLUMNS if excitation else ())] if with_health else []
-    if tracked:
-        cols += FRAME_COLUMNS if not cols else FRAME_COLUMNS[2:]
-        cols += VIO_COLUMNS if vio else []
+    cols = health_csv_columns(with_health, excitation, tracked, vio)
     with path.open("w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
         w.writeheader()
@@ -181,6 +178,16 @@ def write_health(path: Path, records: Sequence[FrameRecord],
                 if r.estimator.vio is not None:
                     row.update(r.estimator.vio.health_fields())
             w.writerow(row)
+
+
+def health_csv_columns(health: bool, excitation: bool, tracked: bool, vio: bool) -> list[str]:
+    """health.csv's columns: the diagnostics' (``health``; with ``excitation``), then the
+    tracking columns (``tracked``; the frame index and time once), then the VIO's (``vio``)."""
+    cols = health_columns(excitation) if health else []
+    if tracked:
+        cols += FRAME_COLUMNS if not cols else FRAME_COLUMNS[2:]
+        cols += VIO_COLUMNS if vio else []
+    return cols
 
 
 FRAME_COLUMNS = ["index", "t_s", "status", "segment", "is_keyframe", "vo_tracks", "n_inliers",
@@ -385,5 +392,5 @@ def _write_ply(path: Path, pts: np.ndarray) -> None:
 
 
 __all__ = ["BODY_TRAJECTORY_COMMENT", "FRAME_COLUMNS", "TRAJECTORY_COMMENT", "FrameSink", "diagnose", "finite_json",
-           "frame_row", "imu_setup", "pose_rows", "replacing", "run_pipeline", "summarise", "wheel_readings",
-           "write_advice", "write_health", "write_json", "write_outputs"]
+           "frame_row", "health_csv_columns", "imu_setup", "pose_rows", "replacing", "run_pipeline", "summarise",
+           "wheel_readings", "write_advice", "write_health", "write_json", "write_outputs"]

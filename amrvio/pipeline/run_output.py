@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import IO, Any
 
 from amrvio.config import PipelineConfig, config_to_dict
-from amrvio.diagnostics.health import health_rows
 from amrvio.io.base import SkippedFrame
 from amrvio.pipeline.events import event_line, frame_events, run_events, skipped_event
 from amrvio.pipeline.pipeline import PipelineOutput
@@ -28,11 +27,11 @@ from amrvio.pipeline.run import (
     FRAME_COLUMNS,
     TRAJECTORY_COMMENT,
     frame_row,
+    health_csv_columns,
     replacing,
     write_json,
     write_outputs,
 )
-from amrvio.pipeline.vio_report import VIO_COLUMNS
 
 RUN_OUTPUTS: tuple[str, ...] = (
     "trajectory.tum", "trajectory_online.tum", "keyframes.tum", "map.ply", "health.csv",
@@ -100,12 +99,9 @@ class RunWriter:
     def _health_row(self, rec: FrameRecord) -> None:
         row = dict(zip(FRAME_COLUMNS, frame_row(rec), strict=True))
         if self._health_csv is None:
-            cols = list(FRAME_COLUMNS)
-            if rec.diagnostics is not None:
-                hcols, _ = health_rows([rec.diagnostics])
-                cols = hcols + FRAME_COLUMNS[2:]
-            if rec.estimator.vio is not None:
-                cols += VIO_COLUMNS
+            d = rec.diagnostics
+            cols = health_csv_columns(d is not None, d is not None and d.excitation is not None, True,
+                                      rec.estimator.vio is not None)
             self._health = (self.out_dir / "health.csv").open("w", newline="", encoding="utf-8")
             self._health_csv = csv.DictWriter(self._health, fieldnames=cols, extrasaction="ignore")
             self._health_csv.writeheader()
