@@ -215,7 +215,7 @@ HELP: dict[str, str] = {
     "recovery": "relocalisation in the lost map (ORB keyframe retrieval + PnP) after a loss",
     "recovery.enabled": "try relocalisation before starting a new map",
     "recovery.max_features": "ORB descriptors kept per keyframe",
-    "recovery.max_keyframes": "keyframes kept per map for relocalisation, the newest (bounds the memory)",
+    "recovery.max_keyframes": "keyframes of the current map kept for relocalisation, the newest (bounds the memory)",
     "recovery.max_bridge_frames": "unusable frames after which the map is searched first (without an IMU; with one "
                                   "the gyro predicts the tracks, and the map is searched if they fail)",
     "recovery.reloc": "relocalisation gates (ORB-SLAM's)",
@@ -318,6 +318,7 @@ KEY_BOUNDS: dict[str, tuple[float, float]] = {
     "tracking.scaled_relative.point_thresh_px": (1e-3, 1000.0),
     "tracking.scaled_relative.min_flow_px": (0.0, 10_000.0),
     "recovery.max_keyframes": (1, 1_000_000),
+    "recovery.max_features": (1, 65_535),  # a keyframe's word counts are kept as uint16
 }
 MAX_ABS_NUMBER = 1e9
 

@@ -527,9 +527,9 @@ def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float)
                     "note": f"peak growth during the run, between the {minutes[0]:g} and {minutes[-1]:g} "
                             "min runs; the frame records go to a temporary file as the run goes, "
                             f"the relocalisation database keeps the newest {RecoveryConfig().max_keyframes} "
-                            "keyframes, the map "
+                            "keyframes of the current map, the map "
                             "keeps the recent tracks' points in full and the older points in an "
-                            "archive"}
+                            "archive, a finished map only its keyframe poses and its points"}
         if span >= 10.0:  # judged on the full run's 1-20 min, not the quick one's
             row.update({"target": f"flat: <= {FLAT_MIB_PER_MIN:g} MiB per minute",
                         "pass": slope <= FLAT_MIB_PER_MIN})

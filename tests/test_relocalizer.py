@@ -182,6 +182,22 @@ def test_vocabulary_words_and_bow_scores() -> None:
     np.testing.assert_array_equal(again.leaves, voc.leaves)
 
 
+def test_bow_scores_are_the_l1_tfidf_similarity_whatever_the_chunk() -> None:
+    """The scores, computed a chunk of documents at a time (the memory bound of a large
+    database), against the formula written out for each document; the chunk does not change a bit."""
+    rng = np.random.default_rng(3)
+    counts = rng.poisson(0.4, (70, 50)).astype(np.uint16)
+    query = rng.integers(0, 50, 30)
+    df = np.array([np.sum(counts[:, w] > 0) for w in range(50)])
+    idf = np.log(70 / np.maximum(df, 1))
+    q = np.bincount(query, minlength=50) * idf
+    q = q / q.sum()
+    want = [1.0 - 0.5 * np.sum(np.abs(d * idf / np.sum(d * idf) - q)) for d in counts.astype(float)]
+    got = {c: bow_scores(query, counts, 50, chunk=c) for c in (1, 7, 32, 1000)}
+    np.testing.assert_allclose(got[32], want, rtol=0, atol=1e-12)
+    assert all(np.array_equal(g, got[32]) for g in got.values())
+
+
 # ---------------------------------------------------------------------------------------------
 # Configuration and database
 # ---------------------------------------------------------------------------------------------
@@ -217,9 +233,11 @@ def test_database_add_cap_priority_replace_remove() -> None:
         db.add(1, img, uv, ids[:5])
     with pytest.raises(ConfigError):
         KeyframeDatabase(max_features=0)
+    with pytest.raises(ConfigError):  # a word's count must fit the uint16 histograms
+        KeyframeDatabase(max_features=65_536)
 
 
-def test_recovery_keeps_the_newest_keyframes_of_each_map() -> None:
+def test_recovery_keeps_the_newest_keyframes_of_the_current_map() -> None:
     img = _texture()
     rng = np.random.default_rng(8)
     m = VoMap()
@@ -230,9 +248,16 @@ def test_recovery_keeps_the_newest_keyframes_of_each_map() -> None:
     for k in range(6):
         rec.add_keyframe(0, k, img, m)
         assert [e.kf_id for e in rec.dbs[0].entries()] == list(range(max(0, k - 2), k + 1))
-    rec.add_keyframe(1, 0, img, m)  # another map: its own database
-    assert len(rec.dbs[0]) == 3 and len(rec.dbs[1]) == 1
     assert sorted(rec.dbs[0].entries()[0].point_ids.tolist())[0] >= 300  # keyframe 3's points
+    rec.lost(0)
+    assert rec.attempt(img, m, frame=7) is not None  # the lost map is searched
+    rec.give_up()
+    rec.add_keyframe(1, 0, img, m)  # a new map: its own database, the old one is never searched again
+    assert list(rec.dbs) == [1] and len(rec.dbs[1]) == 1
+    rec.lost(0)
+    assert rec.attempt(img, m, frame=8) is None  # nothing left to search in map 0
+    rec.add_keyframe(1, 1, img, m)
+    assert list(rec.dbs) == [1] and len(rec.dbs[1]) == 2
 
 
 # ---------------------------------------------------------------------------------------------

@@ -294,3 +294,31 @@ def test_point_table_archive_reads_and_writes_as_a_dict_would() -> None:
     assert table.base > 4000  # the archive took the old ids: the dense part is the recent ones
     n_old = int(np.sum(ids < table.base))
     assert table.nbytes < (table.end - table.base) * 25 + (n_old + 2000) * 33
+
+
+def test_a_new_map_starts_at_its_first_track_and_a_finished_map_keeps_poses_and_points() -> None:
+    """Track ids are global: a new map's table starts at its first track, not at id 0 (a lower id
+    still reads and writes, in the archive). A finished map (``compact``) drops its keyframes'
+    tracks and moves its points to the archive: every read is the same as before, and what it
+    holds is the points (33 bytes each) and the poses."""
+    t = PointTable()
+    t.ensure_capacity(50_100, first=50_000)
+    assert t.base == 50_000 and t.nbytes == 1024 * 25  # from 0 it would take 50 100 * 25 bytes
+    t.set(np.array([49_990, 50_010]), np.array([[1.0, 2, 3], [4, 5, 6]]), True)
+    assert np.array_equal(t[np.array([49_990, 50_010, 7])], [[1, 2, 3], [4, 5, 6], [0, 0, 0]])
+    assert t.has(np.array([49_990, 50_010, 50_011])).tolist() == [True, True, False]
+    t.ensure_capacity(70_000, first=60_000)  # no longer empty: where it starts stays
+    assert t.base == 50_000
+    m = _mapper_with_window(0.3)[0].map
+    m.set_points(np.array([10_000]), np.array([[0.5, 0.5, 4.0]]))  # an id far past the others
+    ids, X = m.all_points()
+    q = np.arange(-5, 10_005, dtype=np.int64)
+    has, got, poses = m.points_of(q), m.xyz[q], [k.T_cam_world.copy() for k in m.keyframes]
+    assert len(m.keyframes[-1].track_ids) > 0 and m.xyz.end - m.xyz.base > 10_000
+    m.compact()
+    assert np.array_equal(m.points_of(q), has) and np.array_equal(m.xyz[q], got)
+    ids2, X2 = m.all_points()
+    assert np.array_equal(ids2, ids) and np.array_equal(X2, X)
+    assert all(np.array_equal(k.T_cam_world, T) for k, T in zip(m.keyframes, poses, strict=True))
+    assert all(len(k.track_ids) == 0 == len(k.uv) for k in m.keyframes)
+    assert m.xyz.nbytes == 33 * len(ids)

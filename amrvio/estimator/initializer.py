@@ -163,7 +163,7 @@ class Initializer:
         cur_mask = np.isin(tracks.ids, self.ref_ids)
         T0 = np.eye(4)
         kf0 = m.add_keyframe(self.ref_index, T0, ref_ids, ref_pts)
-        m.ensure_capacity(tracks.next_id)
+        m.ensure_capacity(tracks.next_id, first=int(ref_ids.min()) if len(ref_ids) else 0)
         good = tv.point_valid
         m.set_points(ref_ids[good], tv.points_c1[good])
         tracks.keep(cur_mask)

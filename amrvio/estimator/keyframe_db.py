@@ -43,15 +43,15 @@ class KeyframeDatabase:
     is first asked for, and again whenever the number of descriptors has doubled since."""
 
     def __init__(self, max_features: int = 1500, seed: int = 0) -> None:
-        if max_features < 1:
-            raise ConfigError(f"KeyframeDatabase: max_features must be >= 1, got {max_features}")
+        if not 1 <= max_features <= 65_535:  # the word counts are uint16
+            raise ConfigError(f"KeyframeDatabase: max_features must be in [1, 65535], got {max_features}")
         self.max_features = max_features
         self.seed = seed
         self._entries: dict[int, KeyframeEntry] = {}
         self._vocab: Vocabulary | None = None
         self._trained_with = 0
         self._words: dict[int, I32] = {}
-        self._counts: I32 | None = None  # (D, n_words) cache of the histograms
+        self._counts: NDArray[np.uint16] | None = None  # (D, n_words) cache of the histograms
 
     def __len__(self) -> int:
         return len(self._entries)
@@ -142,7 +142,7 @@ class KeyframeDatabase:
         entries = self.entries()
         if self._counts is None:
             self._counts = np.stack([np.bincount(self._words[e.kf_id], minlength=vocab.n_words)
-                                     for e in entries]).astype(np.int32)
+                                     for e in entries]).astype(np.uint16)  # < max_features <= 65 535 a word
         scores = bow_scores(query_words, self._counts, vocab.n_words)
         order = np.lexsort((np.arange(len(entries)), -scores))
         return [(float(scores[i]), entries[i]) for i in order]

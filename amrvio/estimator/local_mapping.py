@@ -91,7 +91,9 @@ class LocalMapping:
         return self.segments[-1]
 
     def new_segment(self, world_from_segment: Sim3) -> Segment:
-        """Start a new, empty map."""
+        """Start a new, empty map; the previous one is done (:meth:`VoMap.compact`)."""
+        if self.segments:
+            self.segments[-1].mapper.map.compact()
         seg = Segment(Mapper(self.K, self.cfg.mapper), world_from_segment)
         self.segments.append(seg)
         self.kf_images = {}

@@ -58,8 +58,12 @@ class PointTable:
     def nbytes(self) -> int:
         return sum(a.nbytes for a in (self._xyz, self._has, self._old_ids, self._old_xyz, self._old_has))
 
-    def ensure_capacity(self, n_tracks: int) -> None:
-        """Grow the dense arrays to hold track ids < ``n_tracks``."""
+    def ensure_capacity(self, n_tracks: int, first: int = 0) -> None:
+        """Grow the dense arrays to hold track ids < ``n_tracks``. A table that holds nothing
+        yet starts them at ``first``, the lowest id it is expected to hold (a new map's first
+        track: the ids are global); a lower id still reads and writes, in the archive."""
+        if not len(self._has) and not len(self._old_ids) and first > self.base:
+            self.base = first
         if n_tracks <= self.end:
             return
         cap = max(n_tracks - self.base, 2 * len(self._has), 1024)
@@ -151,9 +155,10 @@ class VoMap:
     xyz: PointTable = field(default_factory=PointTable)
     n_retired: int = 0  # the oldest keyframes whose tracks were dropped (:meth:`retire_tracks`)
 
-    def ensure_capacity(self, n_tracks: int) -> None:
-        """Grow the per-track arrays to hold track ids < ``n_tracks``."""
-        self.xyz.ensure_capacity(n_tracks)
+    def ensure_capacity(self, n_tracks: int, first: int = 0) -> None:
+        """Grow the per-track arrays to hold track ids < ``n_tracks`` (from ``first`` in a new
+        map: :meth:`PointTable.ensure_capacity`)."""
+        self.xyz.ensure_capacity(n_tracks, first)
 
     def add_keyframe(self, frame_index: int, T_cam_world: F64, track_ids: I64, uv: F64) -> Keyframe:
         kf = Keyframe(len(self.keyframes), frame_index, T_cam_world.copy(), track_ids.copy(),
@@ -187,6 +192,13 @@ class VoMap:
         kept = [int(kf.track_ids.min()) for kf in self.keyframes[end:] if len(kf.track_ids)]
         if kept and 2 * (min(kept) - self.xyz.base) >= self.xyz.end - self.xyz.base:
             self.xyz.archive_below(min(kept))
+
+    def compact(self) -> None:
+        """The map is done (a new segment took over; nothing tracks in it again): every
+        keyframe drops its tracks and every point moves to the archive, so that a finished map
+        holds its keyframe poses and its points and nothing else. Reads of both stay the same."""
+        self.retire_tracks(0)
+        self.xyz.archive_below(self.xyz.end)
 
     def all_points(self) -> tuple[I64, F64]:
         return self.xyz.all_points()

@@ -1,8 +1,8 @@
 """Map recovery after a loss: keyframe retrieval by appearance, then PnP, in the map that was
 being tracked (``estimator.relocalizer``), so that the trajectory keeps one map and one scale.
 
-Every keyframe of every segment is described when it is sealed (ORB at its tracked pixels, in
-a per-segment :class:`KeyframeDatabase` that keeps the newest ``max_keyframes``). After a loss,
+Every keyframe is described when it is sealed (ORB at its tracked pixels, in the current
+segment's :class:`KeyframeDatabase`, which keeps the newest ``max_keyframes``). After a loss,
 each new sharp frame is tried against the segment that was lost until it is found again or a new
 map is initialised.
 """
@@ -30,9 +30,10 @@ U8 = NDArray[np.uint8]
 @dataclass(frozen=True, slots=True)
 class RecoveryConfig:
     """``enabled``: try relocalisation after a loss; ``reloc``: its gates; ``max_features``:
-    descriptors kept per keyframe; ``max_keyframes``: keyframes kept per map, the newest (the
-    oldest is forgotten when one more is sealed: the memory stays bounded on a long run, and the
-    search is for the recent map, not a loop closure); ``max_bridge_frames``: after this many frames without a
+    descriptors kept per keyframe; ``max_keyframes``: keyframes kept of the current map, the newest
+    (the oldest is forgotten when one more is sealed, and an older map's database when a new map
+    starts: the memory stays bounded on a long run, and the search is for the recent map, not a
+    loop closure); ``max_bridge_frames``: after this many frames without a
     usable image (blurred, dark), the map is searched by appearance before the motion model is
     trusted again; ``link``: placing a new map by the points it shares with the previous one."""
 
@@ -45,7 +46,7 @@ class RecoveryConfig:
 
 
 class MapRecovery:
-    """Per-segment keyframe databases and the relocalisation attempts after a loss."""
+    """The current segment's keyframe database and the relocalisation attempts after a loss."""
 
     def __init__(self, K: F64, config: RecoveryConfig, seed: int) -> None:
         self.cfg = config
@@ -61,7 +62,12 @@ class MapRecovery:
         if not self.cfg.enabled:
             return
         t0 = time.perf_counter()
-        db = self.dbs.setdefault(segment, KeyframeDatabase(self.cfg.max_features, self.seed))
+        if segment not in self.dbs:
+            # a new map: the older maps' databases are never searched again (a loss searches
+            # the map just lost, and a new map ends that search), so they go
+            self.dbs = {s: db for s, db in self.dbs.items() if s > segment}
+            self.dbs[segment] = KeyframeDatabase(self.cfg.max_features, self.seed)
+        db = self.dbs[segment]
         kf = vomap.keyframes[kf_id]
         db.add(kf_id, image, kf.uv, kf.track_ids, priority=vomap.points_of(kf.track_ids))
         while len(db) > self.cfg.max_keyframes:

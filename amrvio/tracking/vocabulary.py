@@ -117,21 +117,25 @@ class Vocabulary:
         return node, word
 
 
-def bow_scores(query_words: I64, doc_counts: NDArray[np.int32], n_words: int) -> F64:
+def bow_scores(query_words: I64, doc_counts: NDArray[np.integer], n_words: int, chunk: int = 32) -> F64:
     """DBoW2 L1 similarity in [0, 1] of a query to each document: ``1 - |v_q - v_d|_1 / 2`` with
     tf-idf vectors normalised to unit L1 norm; ``doc_counts`` (D, n_words) word counts per
-    document; idf = log(D / documents containing the word)."""
-    counts = np.asarray(doc_counts, dtype=np.float64)
+    document; idf = log(D / documents containing the word). The documents are scored ``chunk``
+    at a time (each row on its own, so the scores do not depend on it): the memory it takes stays
+    that of ``chunk`` float vectors however large the database."""
+    counts = np.asarray(doc_counts)
     n_docs = len(counts)
     if n_docs == 0:
         return np.zeros(0)
     df = np.count_nonzero(counts, axis=0)
     idf = np.log(n_docs / np.maximum(df, 1))
-    vd = counts * idf
-    vd /= np.maximum(vd.sum(axis=1, keepdims=True), 1e-300)
     vq = np.bincount(query_words, minlength=n_words).astype(np.float64) * idf
     vq /= max(float(vq.sum()), 1e-300)
-    scores: F64 = 1.0 - 0.5 * np.abs(vd - vq[None, :]).sum(axis=1)
+    scores: F64 = np.empty(n_docs)
+    for lo in range(0, n_docs, max(int(chunk), 1)):
+        vd = counts[lo:lo + chunk].astype(np.float64) * idf
+        vd /= np.maximum(vd.sum(axis=1, keepdims=True), 1e-300)
+        scores[lo:lo + chunk] = 1.0 - 0.5 * np.abs(vd - vq[None, :]).sum(axis=1)
     return scores
 
 
