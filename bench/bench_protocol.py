@@ -25,6 +25,7 @@ from amrvio.eval.evaluate import evaluate
 from amrvio.io.base import Dataset
 from amrvio.io.dataset import open_dataset
 from amrvio.io.trajectory import read_tum
+from amrvio.pipeline.heap import bound_heap
 from amrvio.pipeline.pipeline import PipelineOutput
 from amrvio.pipeline.records import PoseStatus
 from amrvio.pipeline.run import run_pipeline
@@ -195,6 +196,7 @@ def _sim(quick: bool) -> list[Row]:
 
 def _rows(quick: bool) -> Iterator[Row]:
     limit_native_threads(1)  # as `amrvio run` does
+    bound_heap()
     for part in (lambda: _sim(quick), lambda: _mh01(), lambda: _phone(), lambda: _kitti(quick)):
         yield from part()
 

@@ -58,6 +58,7 @@ from amrvio.eval.evaluate import evaluate
 from amrvio.io.base import Dataset
 from amrvio.io.dataset import open_dataset
 from amrvio.pipeline.diagnose import setup_diagnostics
+from amrvio.pipeline.heap import bound_heap
 from amrvio.pipeline.pipeline import PipelineOutput
 from amrvio.pipeline.records import FrameRecord, PoseStatus
 from amrvio.pipeline.recovery import RecoveryConfig
@@ -442,6 +443,7 @@ from amrvio.cli.reproducible import make_reproducible
 make_reproducible("run")  # a fixed memory layout, as `amrvio run` has: the same keyframes each time
 from amrvio.io.dataset import open_dataset
 from amrvio.pipeline.run import run_pipeline
+from amrvio.pipeline.heap import bound_heap
 from amrvio.pipeline.threads import limit_native_threads
 def rss_mb():
     with open("/proc/self/statm") as fh:
@@ -464,6 +466,7 @@ def trimmed_mb():  # the resident set once glibc has returned the free heap page
         return float("nan")
     return rss_mb()
 limit_native_threads(1)
+bound_heap()  # as `amrvio run` does
 ds = open_dataset(sys.argv[1])
 trimmed_mb()  # the heap opening the dataset freed goes back first: it is not the run's
 before = rss_mb()
@@ -575,6 +578,7 @@ def alternative_rows(tag: str, ds: Dataset, gt: Trajectory) -> list[Row]:
 
 def run(quick: bool) -> list[Row]:
     limit_native_threads(1)  # as `amrvio run` does
+    bound_heap()
     repeats = 1 if quick else 3
     rows: list[Row] = []
     kitti = _kitti()

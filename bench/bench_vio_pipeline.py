@@ -37,6 +37,7 @@ from amrvio.app.run import RunResult
 from amrvio.app.run import run as run_recording
 from amrvio.io.calib import read_euroc_imu
 from amrvio.io.dataset import open_dataset
+from amrvio.pipeline.heap import bound_heap
 from amrvio.pipeline.records import PoseStatus
 from amrvio.pipeline.run_eval import yaw_alignment
 from amrvio.pipeline.threads import limit_native_threads
@@ -338,6 +339,7 @@ def constant_velocity(work: Path) -> list[Row]:
 
 def run_rows(quick: bool) -> list[Row]:
     limit_native_threads(1)  # as `amrvio run` does
+    bound_heap()
     rows: list[Row] = []
     with tempfile.TemporaryDirectory(prefix="amrvio_bench_vio_") as tmp:
         work = Path(tmp)
