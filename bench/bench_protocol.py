@@ -25,11 +25,10 @@ from amrvio.eval.evaluate import evaluate
 from amrvio.io.base import Dataset
 from amrvio.io.dataset import open_dataset
 from amrvio.io.trajectory import read_tum
-from amrvio.pipeline.heap import bound_heap
 from amrvio.pipeline.pipeline import PipelineOutput
 from amrvio.pipeline.records import PoseStatus
 from amrvio.pipeline.run import run_pipeline
-from amrvio.pipeline.threads import limit_native_threads
+from amrvio.pipeline.threads import run_settings
 from amrvio.types.trajectory import Trajectory
 
 # the protocol measures the monocular VO (issue 9); the simulated recordings carry an IMU, and
@@ -195,8 +194,7 @@ def _sim(quick: bool) -> list[Row]:
 
 
 def _rows(quick: bool) -> Iterator[Row]:
-    limit_native_threads(1)  # as `amrvio run` does
-    bound_heap()
+    run_settings()  # as `amrvio run` does
     for part in (lambda: _sim(quick), lambda: _mh01(), lambda: _phone(), lambda: _kitti(quick)):
         yield from part()
 

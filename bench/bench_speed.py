@@ -1,8 +1,8 @@
 """Real-time throughput of the monocular VO (issue 11): a per-stage time budget on one core.
 
 Each run is ``amrvio run`` without the evaluation and the HTML report: one thread for OpenCV and
-BLAS (:func:`amrvio.pipeline.threads.limit_native_threads`, as the CLI does), the diagnostics
-on, images decoded from disk inside the timed loop, the output folder written as the run goes
+BLAS and glibc's heap thresholds fixed (:func:`amrvio.pipeline.threads.run_settings`, as the CLI
+does), the diagnostics on, images decoded from disk inside the timed loop, the output folder written as the run goes
 (:class:`amrvio.pipeline.run_output.RunWriter`) and finished at the end.
 
 Clocks: the machine is shared, so every figure is CPU time, not wall time. Frames/s is frames
@@ -58,13 +58,12 @@ from amrvio.eval.evaluate import evaluate
 from amrvio.io.base import Dataset
 from amrvio.io.dataset import open_dataset
 from amrvio.pipeline.diagnose import setup_diagnostics
-from amrvio.pipeline.heap import bound_heap
 from amrvio.pipeline.pipeline import PipelineOutput
 from amrvio.pipeline.records import FrameRecord, PoseStatus
 from amrvio.pipeline.recovery import RecoveryConfig
 from amrvio.pipeline.run import run_pipeline
 from amrvio.pipeline.run_output import RunWriter
-from amrvio.pipeline.threads import limit_native_threads
+from amrvio.pipeline.threads import run_settings
 from amrvio.types.trajectory import Trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -443,8 +442,7 @@ from amrvio.cli.reproducible import make_reproducible
 make_reproducible("run")  # a fixed memory layout, as `amrvio run` has: the same keyframes each time
 from amrvio.io.dataset import open_dataset
 from amrvio.pipeline.run import run_pipeline
-from amrvio.pipeline.heap import bound_heap
-from amrvio.pipeline.threads import limit_native_threads
+from amrvio.pipeline.threads import run_settings
 def rss_mb():
     with open("/proc/self/statm") as fh:
         return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
@@ -465,8 +463,7 @@ def trimmed_mb():  # the resident set once glibc has returned the free heap page
     except (OSError, AttributeError):
         return float("nan")
     return rss_mb()
-limit_native_threads(1)
-bound_heap()  # as `amrvio run` does
+run_settings()  # as `amrvio run` does
 ds = open_dataset(sys.argv[1])
 trimmed_mb()  # the heap opening the dataset freed goes back first: it is not the run's
 before = rss_mb()
@@ -577,8 +574,7 @@ def alternative_rows(tag: str, ds: Dataset, gt: Trajectory) -> list[Row]:
 
 
 def run(quick: bool) -> list[Row]:
-    limit_native_threads(1)  # as `amrvio run` does
-    bound_heap()
+    run_settings()  # as `amrvio run` does
     repeats = 1 if quick else 3
     rows: list[Row] = []
     kitti = _kitti()

@@ -37,10 +37,9 @@ from amrvio.app.run import RunResult
 from amrvio.app.run import run as run_recording
 from amrvio.io.calib import read_euroc_imu
 from amrvio.io.dataset import open_dataset
-from amrvio.pipeline.heap import bound_heap
 from amrvio.pipeline.records import PoseStatus
 from amrvio.pipeline.run_eval import yaw_alignment
-from amrvio.pipeline.threads import limit_native_threads
+from amrvio.pipeline.threads import run_settings
 from amrvio.sim.imu_from_gt import write_with_synthetic_imu
 from amrvio.sim.simulate import SimConfig, simulate
 
@@ -338,8 +337,7 @@ def constant_velocity(work: Path) -> list[Row]:
 
 
 def run_rows(quick: bool) -> list[Row]:
-    limit_native_threads(1)  # as `amrvio run` does
-    bound_heap()
+    run_settings()  # as `amrvio run` does
     rows: list[Row] = []
     with tempfile.TemporaryDirectory(prefix="amrvio_bench_vio_") as tmp:
         work = Path(tmp)
@@ -362,7 +360,7 @@ def run(quick: bool) -> list[Row]:
 if __name__ == "__main__":
     only = [a for a in sys.argv[1:] if not a.startswith("--")]
     if only:  # e.g. `python -m bench.bench_vio_pipeline fst`: one scenario
-        limit_native_threads(1)
+        run_settings()
         with tempfile.TemporaryDirectory(prefix="amrvio_bench_vio_") as tmp:
             w = Path(tmp)
             table = {"replay": lambda: replay(w, "--quick" in sys.argv), "mh01": lambda: mh01(w),

@@ -26,7 +26,7 @@ from amrvio.io.dataset import open_dataset
 from amrvio.pipeline.pipeline import PipelineOutput
 from amrvio.pipeline.records import PoseStatus
 from amrvio.pipeline.run import run_pipeline
-from amrvio.pipeline.threads import limit_native_threads
+from amrvio.pipeline.threads import run_settings
 from amrvio.types.trajectory import Trajectory
 
 KITTI = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "kitti00_0000-0199"
@@ -264,7 +264,7 @@ def _ba_backends(repeats: int) -> list[Row]:
 
 
 def run(quick: bool) -> list[Row]:
-    limit_native_threads(1)  # as `amrvio run` does
+    run_settings()  # as `amrvio run` does
     repeats = 1 if quick else 3
     rows = _ba_backends(repeats)
     rows += _kitti(repeats)

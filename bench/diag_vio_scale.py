@@ -40,7 +40,7 @@ from amrvio.estimator import vio_backend
 from amrvio.estimator.vio_landmarks import project_px
 from amrvio.estimator.vio_types import VisualObservations
 from amrvio.io.dataset import open_dataset
-from amrvio.pipeline.threads import limit_native_threads
+from amrvio.pipeline.threads import run_settings
 from amrvio.sim.render import SceneRenderer
 from amrvio.sim.scene import make_scene
 from amrvio.sim.simulate import SimConfig, make_camera, simulate
@@ -159,7 +159,7 @@ def speed_ratio(res: RunResult, seq: Path, t0_s: float = 1.0, t1_s: float = 3.0)
 
 def main(argv: list[str]) -> int:
     seed = int(argv[0]) if argv else 0
-    limit_native_threads(1)
+    run_settings()  # as `amrvio run` does
     work = Path(tempfile.mkdtemp(prefix="diag_vio_scale_"))
     seq = work / f"fst{seed}"
     simulate(SimConfig(motion="forward-stop-turn", seconds=8.0, width=376, height=240, seed=seed), seq, force=True)

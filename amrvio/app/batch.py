@@ -167,14 +167,12 @@ def run_recording(rec: Recording, out_root: str, options: BatchOptions) -> Row:
     ``error.txt`` in its folder holds the details. Runs in a worker process or a Ray task."""
     from amrvio.app.run import run
     from amrvio.config import config_from_dict
-    from amrvio.pipeline.heap import bound_heap
-    from amrvio.pipeline.threads import limit_native_threads
+    from amrvio.pipeline.threads import run_settings
 
     folder = Path(out_root) / rec.name
     if finished_here(folder, rec, options):
         return table_row(rec, folder)
-    limit_native_threads(1)
-    bound_heap()
+    run_settings()
     try:
         folder.mkdir(parents=True, exist_ok=True)
         for name in ("error.txt", RUN_MARK):

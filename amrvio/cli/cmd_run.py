@@ -127,15 +127,14 @@ def run(args: argparse.Namespace) -> int:
     from amrvio.app.run import run as run_recording
     from amrvio.cli.interrupt import StopRequest
     from amrvio.config import PipelineConfig
-    from amrvio.pipeline.heap import bound_heap
-    from amrvio.pipeline.threads import limit_native_threads
+    from amrvio.pipeline.threads import run_settings
 
     cfg = build_config(args)
     if not isinstance(cfg, PipelineConfig):
         raise TypeError("build_config returned no PipelineConfig")
-    # one thread for OpenCV and OpenBLAS: measured faster for the VO's small solves
-    limit_native_threads(1)
-    bound_heap()  # a long run's freed arrays go back to the system (amrvio.pipeline.heap)
+    # one thread for OpenCV and OpenBLAS (measured faster for the VO's small solves); a long
+    # run's freed arrays go back to the system (amrvio.pipeline.heap)
+    run_settings()
     with StopRequest() as stop:
         res = run_recording(args.dataset, cfg, out=args.out, calib=args.calib,
                             max_frames=args.max_frames, force=args.force,

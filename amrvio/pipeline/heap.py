@@ -1,5 +1,5 @@
 """The C heap of a long run (glibc's malloc), set explicitly by the caller like the thread
-settings (:mod:`amrvio.pipeline.threads`): the CLI and the benchmark call :func:`bound_heap`;
+settings: the CLI and the benchmark call it through :func:`amrvio.pipeline.threads.run_settings`;
 the library itself never does, since the setting is the whole process's.
 
 glibc serves a block of 128 KiB or more (an image, a pyramid level, a BA matrix) from its own

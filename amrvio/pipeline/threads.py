@@ -2,7 +2,8 @@
 
 The VO does many small dense solves (local BA, PnP, triangulation); with OpenBLAS threads on
 a shared 2-core machine they ran several times slower than with one thread (bench_vo). The CLI
-and the benchmark call :func:`limit_native_threads`; the library itself never does.
+and the benchmark call :func:`run_settings` (these threads and glibc's heap thresholds); the
+library itself never does.
 """
 
 from __future__ import annotations
@@ -24,4 +25,14 @@ def limit_native_threads(n: int = 1) -> int:
     return sum(1 for info in threadpool_info() if info.get("user_api") == "blas")
 
 
-__all__ = ["limit_native_threads"]
+def run_settings() -> None:
+    """The process settings of ``amrvio run`` and ``amrvio batch``: OpenCV and the BLAS on one
+    thread (:func:`limit_native_threads`) and glibc's heap thresholds fixed
+    (:func:`amrvio.pipeline.heap.bound_heap`). The benchmarks call it to measure what the CLI runs."""
+    from amrvio.pipeline.heap import bound_heap
+
+    limit_native_threads(1)
+    bound_heap()
+
+
+__all__ = ["limit_native_threads", "run_settings"]

@@ -132,10 +132,11 @@ def bow_scores(query_words: I64, doc_counts: NDArray[np.integer], n_words: int, 
     vq = np.bincount(query_words, minlength=n_words).astype(np.float64) * idf
     vq /= max(float(vq.sum()), 1e-300)
     scores: F64 = np.empty(n_docs)
-    for lo in range(0, n_docs, max(int(chunk), 1)):
-        vd = counts[lo:lo + chunk].astype(np.float64) * idf
+    step = max(int(chunk), 1)
+    for lo in range(0, n_docs, step):
+        vd = counts[lo:lo + step].astype(np.float64) * idf
         vd /= np.maximum(vd.sum(axis=1, keepdims=True), 1e-300)
-        scores[lo:lo + chunk] = 1.0 - 0.5 * np.abs(vd - vq[None, :]).sum(axis=1)
+        scores[lo:lo + step] = 1.0 - 0.5 * np.abs(vd - vq[None, :]).sum(axis=1)
     return scores
 
 
