@@ -177,15 +177,23 @@ def hamming(a: U8, b: U8) -> I64:
 
 
 def hamming_matrix(a: U8, b: U8) -> I64:
-    """(N, M) Hamming distances between the (N, 32) and (M, 32) uint8 descriptors."""
+    """(N, M) Hamming distances between the (N, 32) and (M, 32) uint8 descriptors. Computed
+    ``HAMMING_BLOCK`` pairs at a time, so that the XOR's temporary stays 1 MiB however large N."""
     if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1] or a.shape[1] % 8:
         raise ShapeError(f"hamming_matrix: descriptors {a.shape} and {b.shape}")
     a64 = np.ascontiguousarray(a).view(np.uint64)
     b64 = np.ascontiguousarray(b).view(np.uint64)
     out = np.zeros((len(a64), len(b64)), dtype=np.int64)
-    for j in range(a64.shape[1]):
-        out += np.bitwise_count(a64[:, j : j + 1] ^ b64[None, :, j])
+    rows = max(HAMMING_BLOCK // max(len(b64), 1), 1)
+    for lo in range(0, len(a64), rows):
+        block = out[lo:lo + rows]
+        for j in range(a64.shape[1]):
+            block += np.bitwise_count(a64[lo:lo + rows, j : j + 1] ^ b64[None, :, j])
     return out
+
+
+HAMMING_BLOCK = 1 << 17
+"""Descriptor pairs per block of :func:`hamming_matrix` (one uint64 XOR each: 1 MiB)."""
 
 
 __all__ = ["DESCRIPTOR_BYTES", "EDGE_PX", "PATCH_SIZE", "SCALE_FACTOR", "OrbFeatures",

@@ -21,24 +21,24 @@ U8 = NDArray[np.uint8]
 
 
 def _nearest(desc: U8, centers: U8) -> I64:
-    """Index of the nearest center (Hamming; the lowest index on ties) of each descriptor."""
-    return np.argmin(hamming_matrix(desc, centers), axis=1).astype(np.int64)
+    """Index of the nearest center (Hamming; the lowest index on ties) of each descriptor, for
+    1024 descriptors at a time (their distance rows only)."""
+    out = np.zeros(len(desc), dtype=np.int64)
+    for lo in range(0, len(desc), 1024):
+        out[lo:lo + 1024] = np.argmin(hamming_matrix(desc[lo:lo + 1024], centers), axis=1)
+    return out
 
 
 def _majority(bits: NDArray[np.uint8], label: I64, k: int) -> U8:
     """(k, 32) bitwise majority of the (N, 256) unpacked bits per label (ties -> 0; a label
-    without members gets zeros)."""
-    order = np.argsort(label, kind="stable")
-    sl = label[order]
-    starts = np.searchsorted(sl, np.arange(k))
-    ends = np.searchsorted(sl, np.arange(k), side="right")
-    present = ends > starts
+    without members gets zeros). Summed one label at a time: a reduction over all N rows at once
+    (``np.add.reduceat`` with an int32 result) casts the whole (N, 256) input first, 5 MiB for the
+    5000 descriptors a vocabulary trains on."""
+    n = np.bincount(label, minlength=k)[:k]
     counts = np.zeros((k, bits.shape[1]), dtype=np.int64)
-    if np.any(present):
-        sums = np.add.reduceat(bits[order], starts[present], axis=0, dtype=np.int32)
-        counts[present] = sums
-    n = (ends - starts)[:, None]
-    return np.packbits(2 * counts > n, axis=1)
+    for i in np.flatnonzero(n):
+        counts[i] = bits[label == i].sum(axis=0, dtype=np.int64)
+    return np.packbits(2 * counts > n[:, None], axis=1)
 
 
 def k_majority(desc: U8, k: int, rng: np.random.Generator, iterations: int = 8) -> U8:
