@@ -14,8 +14,10 @@ and keeps one pose instead of its observations. The memory of a long run stays b
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterator
 from dataclasses import dataclass
 from enum import Enum
+from typing import overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -92,13 +94,85 @@ def to_se3(T: F64) -> SE3:
     return SE3(SO3(T[:3, :3]), T[:3, 3])
 
 
+_STATUSES = tuple(PoseStatus)
+_KINDS = tuple(AnchorKind)
+
+
+class AnchorBook:
+    """The frames' anchors in columns: one 4x4 pose and five small integers a frame (status,
+    kind, segment, keyframe, reference frame; -1 for None), and the observations of the frames
+    not settled yet. A long run keeps 168 bytes a frame instead of two Python objects and a
+    separate 4x4 array (about 350 bytes). ``book[i]`` is the :class:`PoseAnchor` of frame ``i``,
+    a value (its pose is a copy), ``book[i:j]`` a list of them; ``book[i] = anchor`` replaces one."""
+
+    def __init__(self) -> None:
+        self._n = 0
+        self._T = np.zeros((0, 4, 4))
+        self._meta = np.zeros((0, 5), dtype=np.int64)
+        self._obs: dict[int, Observations] = {}
+
+    def __len__(self) -> int:
+        return self._n
+
+    def __iter__(self) -> Iterator[PoseAnchor]:
+        return (self[i] for i in range(self._n))
+
+    def append(self, anchor: PoseAnchor) -> None:
+        row = _meta_row(anchor)  # checked before anything is written
+        if self._n == len(self._T):
+            cap = max(self._n + self._n // 2, 256)
+            T, meta = np.zeros((cap, 4, 4)), np.zeros((cap, 5), dtype=np.int64)
+            T[: self._n], meta[: self._n] = self._T[: self._n], self._meta[: self._n]
+            self._T, self._meta = T, meta
+        self._n += 1
+        self._write(self._n - 1, anchor, row)
+
+    @overload
+    def __getitem__(self, index: int) -> PoseAnchor: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> list[PoseAnchor]: ...
+
+    def __getitem__(self, index: int | slice) -> PoseAnchor | list[PoseAnchor]:
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(self._n))]
+        i = self._at(index)
+        st, kind, seg, kf, ref = (int(v) for v in self._meta[i])
+        return PoseAnchor(_STATUSES[st], _KINDS[kind], None if seg < 0 else seg, None if kf < 0 else kf,
+                          self._T[i].copy(), self._obs.get(i), None if ref < 0 else ref)
+
+    def __setitem__(self, index: int, a: PoseAnchor) -> None:
+        self._write(self._at(index), a, _meta_row(a))
+
+    def _write(self, i: int, a: PoseAnchor, row: tuple[int, ...]) -> None:
+        self._T[i] = a.T_cam_ref
+        self._meta[i] = row
+        if a.observations is None:
+            self._obs.pop(i, None)
+        else:
+            self._obs[i] = a.observations
+
+    def _at(self, index: int) -> int:
+        if not -self._n <= index < self._n:
+            raise IndexError(f"anchor {index} of {self._n}")
+        return index % self._n
+
+
+def _meta_row(a: PoseAnchor) -> tuple[int, ...]:
+    """(status, kind, segment, keyframe, reference frame) as integers, -1 for None."""
+    ids = (a.segment, a.keyframe, a.ref_frame)
+    if any(v is not None and v < 0 for v in ids):
+        raise ValueError(f"an anchor's segment, keyframe and frame index are never negative, got {ids}")
+    return (_STATUSES.index(a.status), _KINDS.index(a.kind), *(-1 if v is None else int(v) for v in ids))
+
+
 class TrajectoryComposer:
     """Construct with the pinhole ``K`` (3x3) and the refinement gates."""
 
     def __init__(self, K: F64, gates: RefineGates) -> None:
         self.K = K
         self.gates = gates
-        self.anchors: list[PoseAnchor] = []
+        self.anchors = AnchorBook()
         self._settled = 0  # anchors before this one were looked at by :meth:`settle`
 
     def add(self, anchor: PoseAnchor) -> None:
@@ -248,5 +322,5 @@ def _fill_interpolated(T_wc: F64, statuses: list[PoseStatus], tracked: NDArray[n
     return out
 
 
-__all__ = ["AnchorKind", "ComposedTrajectory", "PoseAnchor", "RefineGates", "TrajectoryComposer",
+__all__ = ["AnchorBook", "AnchorKind", "ComposedTrajectory", "PoseAnchor", "RefineGates", "TrajectoryComposer",
            "to_se3"]
