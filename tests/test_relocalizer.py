@@ -173,8 +173,7 @@ def test_majority_is_the_bitwise_vote_of_each_label() -> None:
     rng = np.random.default_rng(3)
     bits = rng.integers(0, 2, (61, 256), dtype=np.uint8)
     label = rng.choice(np.array([0, 1, 2, 4, 6]), 61).astype(np.int64)
-    label[:4], bits[:4, 0] = 7, [1, 1, 0, 0]
-    label[label == 7] = np.array([7, 7, 7, 7])
+    label[:4], bits[:4, 0] = 7, [1, 1, 0, 0]  # label 7: these four rows only, a 2-2 tie at bit 0
     want = np.zeros((8, 256), dtype=np.uint8)
     for k in range(8):
         rows = bits[label == k]

@@ -14,7 +14,7 @@ and keeps one pose instead of its observations. The memory of a long run stays b
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 from typing import overload
@@ -98,7 +98,7 @@ _STATUSES = tuple(PoseStatus)
 _KINDS = tuple(AnchorKind)
 
 
-class AnchorBook:
+class AnchorBook(Sequence[PoseAnchor]):
     """The frames' anchors in columns: one 4x4 pose and five small integers a frame (status,
     kind, segment, keyframe, reference frame; -1 for None), and the observations of the frames
     not settled yet. A long run keeps 168 bytes a frame instead of two Python objects and a
@@ -113,9 +113,6 @@ class AnchorBook:
 
     def __len__(self) -> int:
         return self._n
-
-    def __iter__(self) -> Iterator[PoseAnchor]:
-        return (self[i] for i in range(self._n))
 
     def append(self, anchor: PoseAnchor) -> None:
         row = _meta_row(anchor)  # checked before anything is written

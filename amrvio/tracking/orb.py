@@ -176,6 +176,10 @@ def hamming(a: U8, b: U8) -> I64:
     return np.bitwise_count(np.bitwise_xor(a, b)).sum(axis=1).astype(np.int64)
 
 
+HAMMING_BLOCK = 1 << 17
+"""Descriptor pairs per block of :func:`hamming_matrix` (one uint64 XOR each: 1 MiB)."""
+
+
 def hamming_matrix(a: U8, b: U8) -> I64:
     """(N, M) Hamming distances between the (N, 32) and (M, 32) uint8 descriptors. Computed
     ``HAMMING_BLOCK`` pairs at a time, so that the XOR's temporary stays 1 MiB however large N."""
@@ -190,10 +194,6 @@ def hamming_matrix(a: U8, b: U8) -> I64:
         for j in range(a64.shape[1]):
             block += np.bitwise_count(a64[lo:lo + rows, j : j + 1] ^ b64[None, :, j])
     return out
-
-
-HAMMING_BLOCK = 1 << 17
-"""Descriptor pairs per block of :func:`hamming_matrix` (one uint64 XOR each: 1 MiB)."""
 
 
 __all__ = ["DESCRIPTOR_BYTES", "EDGE_PX", "PATCH_SIZE", "SCALE_FACTOR", "OrbFeatures",
