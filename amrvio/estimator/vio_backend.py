@@ -38,6 +38,7 @@ from amrvio.estimator.vio_graph import (
     EXPIRED,
     WindowFrame,
     add_priors,
+    live_slots,
     make_camera,
     make_smoother,
     marginal_covariance,
@@ -103,6 +104,12 @@ class VioBackend:
     @property
     def initialised(self) -> bool:
         return self._last is not None
+
+    @property
+    def factor_slots(self) -> tuple[int, int]:
+        """(slots, factors) of the smoother's factor list: the slots stay near the factors."""
+        graph = self._smoother.getFactors() if self._smoother is not None else None
+        return (0, 0) if graph is None else (int(graph.size()), int(graph.nrFactors()))
 
     def initialise(self, init: VioInitialState, imu: ImuData | None = None,
                    observations: VisualObservations | None = None) -> VioEstimate:
@@ -201,14 +208,12 @@ class VioBackend:
         removed: list[int] = []
         if not prev.keyframe:  # the previous frame was kept only until this one: drop it
             stamps.update(dict.fromkeys((Xp, Vp, Bp), EXPIRED))
-            removed = prev.slots
-        positions = []
-        used: list[tuple[int, F64]] = []
+            removed = live_slots(self._smoother, prev.slots, prev.factors)
         born = {lm.key: lm.first_keyframe for lm in self._tracks.active.values()}
-        for key, uv in seen:
-            positions.append(graph.size())
-            graph.add(self._cam.factor(uv, k, key, self._age_noise(k - born.get(key, k))))
-            used.append((key, uv))
+        first, used = graph.size(), list(seen)
+        factors = [self._cam.factor(uv, k, key, self._age_noise(k - born.get(key, k))) for key, uv in used]
+        for f in factors:
+            graph.add(f)
         n_new = 0
         if is_kf:
             for lm_id, uv in zip(observations.ids.tolist(), observations.uv_px, strict=True):
@@ -232,7 +237,7 @@ class VioBackend:
             return FrameResult(est, is_kf, predicted, VisualStats(nobs, len(used), n_gated, n_new), None,
                                time.perf_counter() - t0)
         if not is_kf:
-            frame.slots = [slots[p] for p in positions]
+            frame.slots, frame.factors = slots[first:first + len(factors)], factors
         self._window = [f for f in self._window if f.ordinal >= ordinal - (self.cfg.window_keyframes - 1)
                         and (f.keyframe or f is not prev)] + [frame]
         state = self._smoothed(k, t_ns)

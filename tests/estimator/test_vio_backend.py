@@ -354,3 +354,17 @@ def test_a_track_beyond_the_range_ratio_limit_starts_a_new_landmark() -> None:
     assert with_limit < 1.25 * clean
     with pytest.raises(ConfigError, match="max_log_scale"):
         VisualConfig(max_log_scale=-0.1)
+
+
+def test_the_smoother_reuses_the_slots_of_removed_factors() -> None:
+    """Each frame adds factors and removes about as many (its projection factors at the next
+    frame, the marginalised ones); iSAM2 keeps a slot for every factor ever added unless it
+    reuses them. Measured: 2317 slots for 1713 factors after 60 frames; 6519 slots for the same
+    1713 factors without reuse."""
+    sc = _scenario("handheld", 6.0, seed=3)
+    be = start(sc)
+    log = run_frames(sc, be, 0.0, 6.0)
+    assert all(r.estimate.status is VioStatus.OK for r in log.results)
+    slots, factors = be.factor_slots
+    assert factors > 50
+    assert slots <= 2 * factors
