@@ -2,11 +2,23 @@
 
 from __future__ import annotations
 
+import os
+import platform
 from pathlib import Path
 
 import pytest
 
+from amrvio.cli.reproducible import blas_coretype, cpu_flags
 from tests.skip_policy import pytest_configure, skip_shared_missing
+
+# `amrvio run` pins OpenBLAS's kernels (amrvio.cli.reproducible), and tests compare the Python API
+# with the CLI to the bit: the test processes load NumPy's OpenBLAS with the same kernels (measured:
+# on an AMD EPYC with AVX-512, whose own choice is the SkylakeX kernels, the events of the tiny
+# simulated run differed from the CLI's at its third frame). It acts only on an OpenBLAS not yet
+# loaded, and NumPy is not imported above.
+_BLAS_CORETYPE = blas_coretype(platform.machine(), cpu_flags())
+if _BLAS_CORETYPE is not None:
+    os.environ.setdefault("OPENBLAS_CORETYPE", _BLAS_CORETYPE)
 
 __all__ = ["make_tiny_sim", "pytest_configure", "shared_data", "tiny_sim"]
 
