@@ -453,15 +453,16 @@ def reset_peak():  # Linux: VmHWM restarts from the resident set now (False wher
     except OSError:
         return False
     return True
-def peak_mb():  # VmHWM, the peak resident set since the reset
-    with open("/proc/self/status") as fh:
-        return next(int(line.split()[1]) / 1024 for line in fh if line.startswith("VmHWM:"))
-def file_mb():  # the part of the resident set mapped from files (RssFile + RssShmem; NaN elsewhere)
+def status_mb(*fields):  # the sum of these /proc/self/status fields (kB) in MiB (NaN elsewhere)
     try:
         with open("/proc/self/status") as fh:
-            return sum(int(line.split()[1]) / 1024 for line in fh if line.startswith(("RssFile:", "RssShmem:")))
+            return sum(int(line.split()[1]) / 1024 for line in fh if line.startswith(fields))
     except OSError:
         return float("nan")
+def peak_mb():  # VmHWM, the peak resident set since the reset
+    return status_mb("VmHWM:")
+def file_mb():  # the part of the resident set mapped from files
+    return status_mb("RssFile:", "RssShmem:")
 def trimmed_mb():  # the resident set once glibc has returned the free heap pages (NaN elsewhere)
     gc.collect()
     try:
