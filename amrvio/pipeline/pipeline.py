@@ -76,7 +76,7 @@ class Pipeline:
         self.initializer = Initializer(K, cfg.init, cfg.seed)
         self.mapping = LocalMapping(K, cfg.mapping)
         self.scale = make_scale_source(cfg.scale, cfg.seed, wheel)
-        self.recovery = MapRecovery(K, cfg.recovery, cfg.seed)
+        self.recovery = MapRecovery(K, cfg.recovery, cfg.seed, cfg.tracking.klt.max_width_px)
         self.composer = TrajectoryComposer(K, RefineGates(cfg.output.final_refine, tracking.min_pnp_inliers,
                                                           tracking.huber_px, tracking.pnp_thresh_px))
         vio = VioStage(cfg.vio, K, imu, self.mapping) if vio_on and imu is not None else None
