@@ -17,6 +17,7 @@ import pytest
 
 from amrvio.config import PipelineConfig
 from amrvio.eval.evaluate import evaluate
+from amrvio.frontend.tracking_types import TrackOutcome
 from amrvio.io.dataset import open_dataset
 from amrvio.pipeline.pipeline import PipelineOutput
 from amrvio.pipeline.records import PoseStatus
@@ -94,3 +95,24 @@ def test_after_a_one_second_black_out_the_map_is_found_again(tmp_path: Path, sce
     assert all(r.segment == 0 and r.status is PoseStatus.TRACKED for r in after)
     assert not any(e.startswith("segment_scale_guess") for r in out.records for e in r.events)
     assert ate <= 1.5
+
+
+def test_frames_that_only_look_blurred_do_not_send_the_standing_camera_to_the_map_search(
+        tmp_path: Path) -> None:
+    """The corridor black-out rendered with seed 2 (the simulator renders no blur here): after the
+    turn the view has less texture than the corridor had, the blur gate calls about 10 frames
+    blurred, and PnP poses each of them from the last sharp image. The next sharp frame used to
+    count as the end of a gap: the map was searched first, and a relocalisation with 327 points
+    put the standing camera 0.62 m away (5.6 % ATE). A gap whose last frame PnP posed leaves the
+    motion model fresh; the camera stays where it was. (The run still ends at 4.0 % ATE against
+    issue 9's 1.5 %: the scale drifts where the robot drives off after the turn.)"""
+    out, _ = _run(tmp_path, scene="corridor", motion="forward-stop-turn", seconds=10.0, width=752,
+                  height=480, blackouts="4.5:1.0", seed=2)
+    posed_blurred = [r.index for r in out.records if r.tracking is not None
+                     and r.tracking.outcome is TrackOutcome.TRACKED_BLURRED]
+    assert len(posed_blurred) >= 5, "the case no longer arises: find one that does"
+    end = posed_blurred[-1] + 1
+    assert not any(e.startswith("relocalised") for r in out.records[end:] for e in r.events)
+    c = out.T_world_cam[:, :3, 3]
+    step = float(np.median(np.linalg.norm(np.diff(c[:90], axis=0), axis=1)))  # driving, before the black-out
+    assert np.linalg.norm(c[end] - c[end - 1]) < 0.5 * step

@@ -78,6 +78,7 @@ class Tracker:
         self.motion = MotionModel()
         self.prev_img: U8 | None = None
         self.gap = 0  # frames since the last good (committed) image
+        self.gap_posed = False  # the last frame of that gap was posed by PnP
         self.ref_inliers: int | None = None  # PnP inliers of that image (None: not posed by PnP)
         self.mapped = False  # tracking against a map (else towards an initialisation reference)
         self.timings: dict[str, float] = {}
@@ -88,6 +89,13 @@ class Tracker:
     @property
     def started(self) -> bool:
         return self.prev_img is not None
+
+    def stale(self, max_gap: int) -> bool:
+        """At least ``max_gap`` frames since the last good image, the last of them not posed by
+        PnP: the motion model no longer says where the camera is. Blurred frames that PnP poses
+        from the last good image keep it fresh (a view with less texture than the recent ones can
+        look blurred: the simulated corridor, without blur, had 10 such frames after a turn)."""
+        return self.gap >= max_gap and not self.gap_posed
 
     def detect(self, img: U8, kf_id: int = UNANCHORED) -> None:
         """Top the track set up with new corners when it fell below 90 % of the target."""
@@ -140,6 +148,7 @@ class Tracker:
         self._toc("klt", t0)
         if blurred:
             self.gap += 1
+            self.gap_posed = False
             return self._report(TrackOutcome.SKIPPED_BLURRED, res)
         self.tracks.keep(res.ok)
         self.tracks.move(res.pts[res.ok])
@@ -183,6 +192,7 @@ class Tracker:
         if not pnp.ok:
             if blurred:
                 self.gap += 1
+                self.gap_posed = False
                 return TrackStep(self._report(TrackOutcome.PREDICTED, res, 0, prior,
                                               pnp.status.value), T_pred, None)
             rel = self._scaled_relative(res, has, m, T_last) if cfg.scaled_relative.enabled else None
@@ -206,6 +216,7 @@ class Tracker:
         if blurred and (ratio is None or ref is None or n_inl < ratio * ref):
             # pose only; keep the last good image as the tracking reference
             self.gap += 1
+            self.gap_posed = True
             return TrackStep(self._report(TrackOutcome.TRACKED_BLURRED, res, n_inl, prior,
                                           pnp.status.value), T_cw, obs)
         # commit the tracks: drop KLT failures and PnP outliers
@@ -237,7 +248,7 @@ class Tracker:
         its PnP inliers (None: not posed by PnP), which a blurred frame must approach to take
         its place."""
         self.prev_img = img
-        self.gap = 0
+        self.gap, self.gap_posed = 0, False
         self.ref_inliers = n_pnp
 
     def _scaled_relative(self, res: KltResult, has: NDArray[np.bool_], m: Landmarks,
