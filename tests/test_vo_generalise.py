@@ -29,7 +29,7 @@ from amrvio.types.trajectory import Trajectory
 def _run(tmp: Path, **sim: object) -> tuple[PipelineOutput, float]:
     """Simulate, run the VO with the default configuration (the IMU off: these are the VO's
     properties; tests/test_vio_pipeline.py runs the VIO); (output, Sim3 ATE % of the path)."""
-    simulate(SimConfig(fps=20.0, blur=False, **sim), tmp / "seq")  # type: ignore[arg-type]
+    simulate(SimConfig(**{"fps": 20.0, "blur": False, **sim}), tmp / "seq")  # type: ignore[arg-type]
     ds = open_dataset(str(tmp / "seq"))
     if ds.groundtruth is None or ds.T_body_cam is None:
         raise AssertionError("the simulator wrote no ground truth")
@@ -77,14 +77,18 @@ def test_a_turn_in_place_is_tracked_and_keeps_the_scale(tmp_path: Path) -> None:
     assert ate <= 1.0
 
 
-@pytest.mark.parametrize(("scene", "motion", "blackout"), [
-    ("corridor", "forward-stop-turn", "4.5:1.0"),
-    ("warehouse", "rough-floor", "4.0:1.0"),
+@pytest.mark.parametrize(("scene", "motion", "blackout", "seed"), [
+    ("corridor", "forward-stop-turn", "4.5:1.0", 0),
+    ("warehouse", "rough-floor", "4.0:1.0", 0),
+    # the robot turns 28 degrees in the dark and the map search fails at the first frame after
+    # it; direct alignment from the stale motion posed that frame 27 degrees off, the map grew in
+    # that frame (5.6 % ATE); now the frame is lost and the next one is found in the map
+    ("corridor", "forward-stop-turn", "4.5:1.0", 2),
 ])
 def test_after_a_one_second_black_out_the_map_is_found_again(tmp_path: Path, scene: str,
-                                                              motion: str, blackout: str) -> None:
+                                                              motion: str, blackout: str, seed: int) -> None:
     out, ate = _run(tmp_path, scene=scene, motion=motion, seconds=8.0 if scene == "warehouse"
-                    else 10.0, width=752, height=480, blackouts=blackout)
+                    else 10.0, width=752, height=480, blackouts=blackout, seed=seed)
     t0, dur = (float(v) for v in blackout.split(":"))
     t = np.array([r.t_ns for r in out.records]) * 1e-9
     t -= t[0] - 0.025  # frame k is stamped at (k + 1/2) / fps
@@ -97,22 +101,18 @@ def test_after_a_one_second_black_out_the_map_is_found_again(tmp_path: Path, sce
     assert ate <= 1.5
 
 
-def test_frames_that_only_look_blurred_do_not_send_the_standing_camera_to_the_map_search(
-        tmp_path: Path) -> None:
-    """The corridor black-out rendered with seed 2 (the simulator renders no blur here): after the
-    turn the view has less texture than the corridor had, the blur gate calls about 10 frames
-    blurred, and PnP poses each of them from the last sharp image. The next sharp frame used to
-    count as the end of a gap: the map was searched first, and a relocalisation with 327 points
-    put the standing camera 0.62 m away (5.6 % ATE). A gap whose last frame PnP posed leaves the
-    motion model fresh; the camera stays where it was. (The run still ends at 4.0 % ATE against
-    issue 9's 1.5 %: the scale drifts where the robot drives off after the turn.)"""
-    out, _ = _run(tmp_path, scene="corridor", motion="forward-stop-turn", seconds=10.0, width=752,
-                  height=480, blackouts="4.5:1.0", seed=2)
-    posed_blurred = [r.index for r in out.records if r.tracking is not None
-                     and r.tracking.outcome is TrackOutcome.TRACKED_BLURRED]
-    assert len(posed_blurred) >= 5, "the case no longer arises: find one that does"
-    end = posed_blurred[-1] + 1
-    assert not any(e.startswith("relocalised") for r in out.records[end:] for e in r.events)
-    c = out.T_world_cam[:, :3, 3]
-    step = float(np.median(np.linalg.norm(np.diff(c[:90], axis=0), axis=1)))  # driving, before the black-out
-    assert np.linalg.norm(c[end] - c[end - 1]) < 0.5 * step
+
+def test_after_blurred_frames_that_pnp_posed_the_map_is_not_searched(tmp_path: Path) -> None:
+    """bench_vo's corridor (752x480, 10 s, 3 EV steps, 2 blur bursts of 0.5 s): PnP poses the
+    frames of a burst from the last sharp image, so the motion model is still fresh when the burst
+    ends, and the map is not searched (Tracker.stale). Searching it there, as before, gave 0.38 %
+    Sim3 ATE instead of 0.088 %."""
+    t = 10.0
+    out, ate = _run(tmp_path, scene="corridor", motion="forward-stop-turn", seconds=t, width=752,
+                    height=480, ev_steps=f"{0.2 * t:.2f}:+1,{0.45 * t:.2f}:-1.5,{0.7 * t:.2f}:+1",
+                    blur_bursts=f"{0.3 * t:.2f}:0.5:3,{0.6 * t:.2f}:0.5:3", blur=True)
+    posed = [r.index for r in out.records if r.tracking is not None
+             and r.tracking.outcome is TrackOutcome.TRACKED_BLURRED]
+    assert len(posed) >= 5, "no burst that PnP poses: the case no longer tests what it guards"
+    assert not any(e.startswith("reloc") for r in out.records for e in r.events)
+    assert ate <= 0.2

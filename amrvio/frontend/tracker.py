@@ -156,10 +156,13 @@ class Tracker:
         return self._report(TrackOutcome.INIT_TRACKED, res)
 
     def track(self, img: U8, blurred: bool, m: Landmarks, segment_scale: float,
-              R_cur_ref: F64 | None = None) -> TrackStep:
+              R_cur_ref: F64 | None = None, stale: bool = False) -> TrackStep:
         """Pose ``img`` against the map ``m`` (segment units; ``segment_scale`` global units per
         segment unit, for the speed record). ``R_cur_ref``: the camera's rotation since the
-        reference image by the gyro, which replaces the motion model's in the KLT prediction."""
+        reference image by the gyro, which replaces the motion model's in the KLT prediction.
+        ``stale``: the motion model is stale (:meth:`stale`, and the map search failed): no
+        direct-alignment fallback, which would start from it (a robot that turned 28 degrees
+        during a black-out was posed 27 degrees off, and the map grew in that frame)."""
         T_last = self.motion.T_last
         if self.prev_img is None or T_last is None:
             raise RuntimeError("Tracker: track() without a previous frame")
@@ -200,7 +203,7 @@ class Tracker:
                 return self._relative_step(img, rel, res, prior, pnp.status.value, steps,
                                            segment_scale)
             # features scarce: direct alignment to the last good image as the fallback
-            d = self._direct(img, V, m) if cfg.direct_fallback else None
+            d = self._direct(img, V, m) if cfg.direct_fallback and not stale else None
             if d is not None:
                 return self._direct_fallback(img, d, m, res, prior)
             R = self._rotation(res) if cfg.rotation_only else None

@@ -277,14 +277,14 @@ class Pipeline:
     def _track_step(self, index: int, img: U8, blurred: bool, events: list[str], R_cur_ref: F64 | None) -> _Step:
         seg = self.mapping.current
         tracks = self.tracker.tracks
-        if not blurred and self.tracker.stale(self.cfg.recovery.max_bridge_frames) and R_cur_ref is None:
-            # back after a long gap (blur, a covered lens): the motion model is stale, the map is searched
-            # first; with the gyro's rotation the tracks go first (they keep the smoother's landmarks)
+        stale = not blurred and self.tracker.stale(self.cfg.recovery.max_bridge_frames) and R_cur_ref is None
+        if stale:  # back after a long gap (blur, a covered lens): the motion model is stale, the map is
+            # searched first; with the gyro's rotation the tracks go first (they keep the smoother's landmarks)
             reloc = self._try_reloc(len(self.mapping.segments) - 1, img, events)
             self.recovery.give_up()
             if reloc is not None:
                 return reloc
-        step = self.tracker.track(img, blurred, seg.mapper.map, seg.world_from_segment.s, R_cur_ref)
+        step = self.tracker.track(img, blurred, seg.mapper.map, seg.world_from_segment.s, R_cur_ref, stale)
         rep = step.report
         if rep.direct_prior:
             events.append("direct_prior")
