@@ -8,9 +8,10 @@ map is initialised.
 
 Keyframes and queries are described on the image the tracker works on: an image wider than the
 tracker's ``max_width_px`` is reduced by the same pyramid levels first (pixels stay in full
-resolution outside). ORB's 31-pixel patch on a blurred 1080p frame sees smooth gradients; on the
-phone recording, full-resolution descriptors matched a keyframe one keyframe older with a median
-reprojection error of about 300 pixels at the tracked pose, and no relocalisation succeeded.
+resolution outside). ORB's 31-pixel patch on a blurred 1080p frame sees smooth gradients: on the
+phone recording, full-resolution descriptors matched the keyframes before a keyframe at a median
+reprojection error of mostly 150-900 pixels at its tracked pose; 12 of its 57 keyframes were found
+in the keyframes before them (22 of 57 at the tracker's level).
 """
 
 from __future__ import annotations

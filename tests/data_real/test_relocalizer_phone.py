@@ -4,7 +4,7 @@ the query are described on the image the tracker works on (one pyramid level dow
 The map is the VO's own over frames 0-17 (one segment); each frame that is not a keyframe is then
 searched in it, with the keyframes described once at full resolution and once reduced as the
 tracker reduces them. Measured: full resolution finds 1 of the 9 frames (ORB's patch on the
-blurred 1080p image matched the keyframes at a median reprojection error of about 300 px at the
+blurred 1080p image matched the keyframes at a median reprojection error of mostly 150-900 px at the
 tracked pose), reduced 3 (frames 7, 10 and 12), each within 0.07 map units of the VO's own pose
 (keyframes 0.26-1.0 units apart)."""
 
