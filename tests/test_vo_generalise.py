@@ -101,7 +101,6 @@ def test_after_a_one_second_black_out_the_map_is_found_again(tmp_path: Path, sce
     assert ate <= 1.5
 
 
-
 def test_after_blurred_frames_that_pnp_posed_the_map_is_not_searched(tmp_path: Path) -> None:
     """bench_vo's corridor (752x480, 10 s, 3 EV steps, 2 blur bursts of 0.5 s): PnP poses the
     frames of a burst from the last sharp image, so the motion model is still fresh when the burst

@@ -20,7 +20,6 @@ import dataclasses
 import time
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -29,7 +28,7 @@ from amrvio.estimator.local_mapping import Segment
 from amrvio.estimator.relocalizer import RelocConfig, RelocResult, describe_query, relocalize
 from amrvio.estimator.segment_link import LinkConfig, link_segments
 from amrvio.estimator.vo_map import VoMap
-from amrvio.tracking.lk import reduction_levels
+from amrvio.tracking.lk import reduced, reduction_levels
 from amrvio.tracking.orb import OrbFeatures
 from amrvio.types.lie import se3_matrix_inverse
 
@@ -116,9 +115,7 @@ class MapRecovery:
         """``image`` reduced as the tracker reduces it (``cv2.pyrDown`` per level) and the image
         pixels per pixel of the result."""
         levels = reduction_levels(image.shape[1], self.max_width_px)
-        for _ in range(levels):
-            image = cv2.pyrDown(image)
-        return image, float(2 ** levels)
+        return reduced(image, levels), float(2 ** levels)
 
 
 def implausible_jump(T_cam_world: F64, T_last: F64 | None, segment_scale: float,

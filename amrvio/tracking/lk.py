@@ -131,13 +131,7 @@ class LkTracker:
         cfg = self.config
         levels = reduction_levels(img.shape[1], cfg.max_width_px)
         lk = normalise_for_tracking(img) if cfg.invariance is Invariance.NORMALISE else img
-        for _ in range(levels):
-            if cfg.reduce_by_area:
-                lk = cv2.resize(lk, ((lk.shape[1] + 1) // 2, (lk.shape[0] + 1) // 2),
-                                interpolation=cv2.INTER_AREA)
-            else:
-                lk = cv2.pyrDown(lk)
-        return TrackImage(img, lk, levels)
+        return TrackImage(img, reduced(lk, levels, cfg.reduce_by_area), levels)
 
     def track(
         self,
@@ -215,6 +209,18 @@ def reduction_levels(width: int, max_width_px: int | None) -> int:
         while (int(width) >> levels) > max_width_px:
             levels += 1
     return levels
+
+
+def reduced(img: U8, levels: int, by_area: bool = False) -> U8:
+    """``img`` halved ``levels`` times, as the tracker reduces wide images: ``cv2.pyrDown``, or
+    2x2 means (``cv2.INTER_AREA``) with ``by_area``."""
+    for _ in range(levels):
+        if by_area:
+            img = np.asarray(cv2.resize(img, ((img.shape[1] + 1) // 2, (img.shape[0] + 1) // 2),
+                                        interpolation=cv2.INTER_AREA), dtype=np.uint8)
+        else:
+            img = np.asarray(cv2.pyrDown(img), dtype=np.uint8)
+    return img
 
 
 def _to_lk(p: NDArray[np.floating], scale: int) -> F32:
