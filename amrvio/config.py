@@ -209,7 +209,7 @@ HELP: dict[str, str] = {
     "init.two_view.min_triangulated": "triangulated points needed",
     "init.min_shared_ratio": "share of the reference's tracks under which it is replaced",
     "init.max_history": "frames since the reference kept for posing by PnP",
-    "init.static_flow_px": "median flow under which the camera counts as at rest (px)",
+    "init.static_flow_mrad": "median flow under which the camera counts as at rest (mrad: px / focal length)",
     "init.min_pnp_inliers": "PnP inliers to pose a frame between the two views",
     "init.pnp_thresh_px": "PnP RANSAC threshold for those frames (px)",
     "recovery": "relocalisation in the lost map (ORB keyframe retrieval + PnP) after a loss",
@@ -233,9 +233,12 @@ HELP: dict[str, str] = {
     "vio.dynamic_init.max_scale_rel_std": "scale std / scale the dynamic initialisation must reach",
     "vio.dynamic_init.max_gravity_std_deg": "gravity-direction std the dynamic initialisation must reach (deg)",
     "vio.max_smear_px": "predicted smear (px, rotation + translation) above which the IMU bridges a frame",
+    "vio.track_smear_px": "while the VIO runs, a frame the blur score calls blurred is tracked if its predicted "
+                          "smear is at most this (px)",
     "vio.zero_velocity": "zero-velocity update while the tracks and the IMU both say the platform stands",
     "vio.zero_velocity.window_s": "seconds over which tracks and IMU must both say standstill",
-    "vio.zero_velocity.max_flow_px": "median track displacement (px) over the window below which the image says still",
+    "vio.zero_velocity.max_flow_mrad": "median track displacement over the window below which the image says still "
+                                       "(mrad: px / focal length)",
     "vio.zero_velocity.min_tracks": "tracks shared across the window needed to judge standstill",
     "vio.zero_velocity.sigma_m_s": "std (m/s) of the zero-velocity update at standstill (0: off)",
     "vio.wheel_sigma_m_s": "std of the wheel-odometry body velocity (m/s; 0: wheels not used; --wheels: 0.05)",

@@ -14,6 +14,8 @@ from amrvio.pipeline.zero_velocity import ZeroVelocity, ZeroVelocityConfig, Zero
 from amrvio.types.sensors import ImuData
 
 FPS, IMU_HZ, G = 20.0, 200.0, 9.81
+F_PX = 229.36  # EuRoC's focal length at 376x240
+HALF_PX_MRAD = 1e3 * 0.5 / F_PX  # a gate of 0.5 px at F_PX
 
 
 def _imu(seconds: float, rate_rad_s: float = 0.0, seed: int = 0) -> ImuData:
@@ -41,7 +43,7 @@ def _run(det: ZeroVelocityDetector, imu: ImuData, n_frames: int, step_px: float 
 
 
 def test_standstill_is_flagged_once_the_window_is_full() -> None:
-    det = ZeroVelocityDetector(ZeroVelocityConfig(window_s=0.3))
+    det = ZeroVelocityDetector(ZeroVelocityConfig(window_s=0.3), F_PX)
     res = _run(det, _imu(2.0), 20)
     # the 0.3 s window holds 6 frame periods at 20 Hz: frames 0-5 have no reference yet
     assert [r.judged for r in res[:6]] == [False] * 6
@@ -53,29 +55,44 @@ def test_standstill_is_flagged_once_the_window_is_full() -> None:
 
 
 def test_a_slow_translation_is_not_standstill() -> None:
-    det = ZeroVelocityDetector(ZeroVelocityConfig(window_s=0.3, max_flow_px=0.5))
+    det = ZeroVelocityDetector(ZeroVelocityConfig(window_s=0.3, max_flow_mrad=HALF_PX_MRAD), F_PX)
     # 0.1 px a frame: 0.6 px over the window (above the gate); the IMU alone would call it still
     res = _run(det, _imu(2.0), 20, step_px=0.1, noise_px=0.0)
     assert all(r.judged and not r.still for r in res[6:])
     assert all(r.flow_px == pytest.approx(0.6, abs=1e-9) for r in res[6:])
     assert all(r.imu is StandstillStatus.STILL for r in res[6:])
     # 0.05 px a frame (0.3 px over the window) is below it
-    res = _run(ZeroVelocityDetector(ZeroVelocityConfig(window_s=0.3, max_flow_px=0.5)), _imu(2.0), 20,
+    res = _run(ZeroVelocityDetector(ZeroVelocityConfig(window_s=0.3, max_flow_mrad=HALF_PX_MRAD), F_PX), _imu(2.0), 20,
                step_px=0.05, noise_px=0.0)
     assert all(r.still for r in res[6:])
 
 
+def test_the_gate_is_an_angle_the_same_standstill_at_twice_the_resolution_is_still() -> None:
+    # 0.1 px a frame at f = 229 px (0.6 px, 2.6 mrad over the window) moves; the same angle at
+    # twice the resolution (0.2 px a frame at f = 459 px) too, and 0.1 px a frame there
+    # (1.3 mrad: half the angle) is still, where a gate in pixels would call it moving
+    cfg = ZeroVelocityConfig(window_s=0.3)
+    assert ZeroVelocityDetector(cfg, 2 * F_PX).max_flow_px == pytest.approx(2 * ZeroVelocityDetector(cfg, F_PX).max_flow_px)
+    assert not any(r.still for r in _run(ZeroVelocityDetector(cfg, F_PX), _imu(2.0), 20, step_px=0.1, noise_px=0.0))
+    assert not any(r.still for r in _run(ZeroVelocityDetector(cfg, 2 * F_PX), _imu(2.0), 20, step_px=0.2,
+                                         noise_px=0.0))
+    assert all(r.still for r in _run(ZeroVelocityDetector(cfg, 2 * F_PX), _imu(2.0), 20, step_px=0.1,
+                                     noise_px=0.0)[6:])
+    with pytest.raises(ConfigError, match="focal length"):
+        ZeroVelocityDetector(cfg, 0.0)
+
+
 def test_a_rotating_imu_is_not_standstill_even_with_still_tracks() -> None:
-    det = ZeroVelocityDetector(ZeroVelocityConfig())
+    det = ZeroVelocityDetector(ZeroVelocityConfig(), F_PX)
     res = _run(det, _imu(2.0, rate_rad_s=0.3), 20)
     assert all(r.judged and not r.still and r.imu is StandstillStatus.ROTATING for r in res[6:])
 
 
 def test_too_few_shared_tracks_or_a_reset_leave_the_frame_unjudged() -> None:
-    det = ZeroVelocityDetector(ZeroVelocityConfig(min_tracks=20))
+    det = ZeroVelocityDetector(ZeroVelocityConfig(min_tracks=20), F_PX)
     res = _run(det, _imu(2.0), 20, n_tracks=19)
     assert all(not r.still and not r.judged and r.n_tracks == 19 for r in res[6:])
-    det = ZeroVelocityDetector(ZeroVelocityConfig())
+    det = ZeroVelocityDetector(ZeroVelocityConfig(), F_PX)
     assert _run(det, _imu(2.0), 10)[-1].still
     det.reset()
     assert not det.last.judged
@@ -83,7 +100,7 @@ def test_too_few_shared_tracks_or_a_reset_leave_the_frame_unjudged() -> None:
     assert not det.update(t_ns, np.arange(60), np.zeros((60, 2)), _imu(2.0)).judged
 
 
-@pytest.mark.parametrize("field,value", [("window_s", 0.0), ("window_s", float("nan")), ("max_flow_px", -1.0),
+@pytest.mark.parametrize("field,value", [("window_s", 0.0), ("window_s", float("nan")), ("max_flow_mrad", -1.0),
                                          ("min_tracks", 0), ("sigma_m_s", -0.01), ("sigma_m_s", float("inf"))])
 def test_bad_config_is_refused(field: str, value: float) -> None:
     with pytest.raises(ConfigError, match=f"zero_velocity.{field}"):
@@ -105,7 +122,7 @@ def test_observe_logs_the_start_and_end_of_a_standstill_and_resets_on_an_untrack
 
     log = ImuLog(10.0)
     log.add(_imu(3.0))
-    det = ZeroVelocityDetector(ZeroVelocityConfig(window_s=0.3))
+    det = ZeroVelocityDetector(ZeroVelocityConfig(window_s=0.3), F_PX)
     ids, uv = np.arange(40, dtype=np.int64), np.random.default_rng(0).uniform(20, 300, (40, 2))
     events: list[list[str]] = []
     for k in range(20):

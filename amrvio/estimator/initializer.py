@@ -31,6 +31,15 @@ from amrvio.geometry.two_view import (
 )
 from amrvio.types.lie import SE3
 
+STILL_MRAD = 2.2
+"""Median track motion, as an angle (px / focal length, in mrad), below which a camera counts as
+standing still: here, at the VIO's static start and in its zero-velocity detection. An angle
+because the same standstill moves its tracks twice as many pixels at twice the resolution: the
+simulator's replay of EuRoC V1_01, whose MAV stands for its first seconds, moved them 0.29 px
+in 0.43 s at 376x240 (f = 229 px) and 0.54 px at 752x480 (f = 459 px), 1.2 mrad at both; the
+old gate of 0.5 px took the static start at the first resolution and refused it at the second.
+2.2 mrad is 0.5 px at f = 229 px, 1.0 px at 459 px and 1.6 px at KITTI's 718 px."""
+
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 U8 = NDArray[np.uint8]
@@ -40,14 +49,15 @@ U8 = NDArray[np.uint8]
 class InitConfig:
     """Two-view gates; ``min_shared_ratio``: the reference is replaced when fewer than this share
     of its tracks (and fewer than twice ``two_view.min_points``) survive; ``max_history``: frames
-    since the reference kept for posing by PnP after the map exists; ``static_flow_px``: median
-    flow under which a low-parallax pair counts as a camera at rest; PnP gates for posing the
+    since the reference kept for posing by PnP after the map exists; ``static_flow_mrad``: median
+    flow, as an angle (px / focal length, mrad), under which a low-parallax pair counts as a
+    camera at rest; PnP gates for posing the
     frames between the two views."""
 
     two_view: TwoViewConfig = field(default_factory=TwoViewConfig)
     min_shared_ratio: float = 0.3
     max_history: int = 300
-    static_flow_px: float = 0.5
+    static_flow_mrad: float = STILL_MRAD
     min_pnp_inliers: int = 25
     pnp_thresh_px: float = 1.0
 
@@ -139,7 +149,7 @@ class Initializer:
         if len(self.history) > self.cfg.max_history:
             self.history = [self.history[0], *self.history[-self.cfg.max_history:]]
         static = (tv.status is TwoViewStatus.LOW_PARALLAX
-                  and tv.median_flow_px < self.cfg.static_flow_px)
+                  and tv.median_flow_px < 1e-3 * self.cfg.static_flow_mrad * float(self.K[0, 0]))
         n_shared = int(cur_mask.sum())
         few = n_shared < max(2 * self.cfg.two_view.min_points,
                              self.cfg.min_shared_ratio * len(self.ref_ids))

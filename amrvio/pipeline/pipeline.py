@@ -60,7 +60,7 @@ class Pipeline:
     diagnostics see the raw image), or a pinhole ``K`` (3x3) for undistorted images.
     ``diagnostics``: the FrameDiagnostics stage (None: off; see ``pipeline.diagnose``).
     The blur gate scores every image with ``diagnostics.blur.blur_score`` (BlurScorerConfig); with
-    VIO it also gates the frames the VIO bridges for their gyro-predicted smear (VioStage.smeared),
+    VIO the gyro-predicted smear decides with it which frames the VIO bridges (VioStage.blur_gate),
     and the gyro's rotation since the tracker's reference image predicts its KLT flow."""
 
     def __init__(self, camera: CameraModel | F64, config: PipelineConfig | None = None,
@@ -117,8 +117,8 @@ class Pipeline:
             events.append("no_signal")
         else:
             blur = self.blur.update(score)
-            smeared = self.sensors.vio is not None and self.sensors.vio.smeared(health, events)
-            blurred = (bool(blur.is_blurred) or smeared) and self.cfg.blur_gating
+            vio, gate = self.sensors.vio, self.cfg.blur_gating
+            blurred = (vio.blur_gate(blur.is_blurred, health, events) if vio else blur.is_blurred) and gate
         self._toc("blur", t0)
         if not self.cfg.track:
             rec = FrameRecord(index, t_ns, PoseStatus.LOST, None, None, None, 1.0, (), blur, health,

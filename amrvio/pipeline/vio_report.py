@@ -75,8 +75,8 @@ class VioStageConfig:
     does not say the platform is a ground robot; ``amrvio run --wheels`` sets 0.05);
     ``max_smear_px``: a frame whose predicted smear (the gyro's rotation plus the translation,
     :mod:`amrvio.pipeline.smear_motion`) is larger is bridged by the IMU (its tracks are not
-    trusted), whatever the blur gate said; ``zero_velocity``: the zero-velocity update at
-    standstill (:mod:`amrvio.pipeline.zero_velocity`)."""
+    trusted), whatever the blur gate said; ``track_smear_px``: see :mod:`amrvio.pipeline.vio_blur`;
+    ``zero_velocity``: the zero-velocity update at standstill (:mod:`amrvio.pipeline.zero_velocity`)."""
 
     enabled: bool = True
     imu_noise_scale: float = 1.0
@@ -88,6 +88,7 @@ class VioStageConfig:
     reinit_after_s: float = 2.0
     wheel_sigma_m_s: float = 0.0
     max_smear_px: float = 8.0
+    track_smear_px: float = 4.0
     zero_velocity: ZeroVelocityConfig = field(default_factory=ZeroVelocityConfig)
 
     def __post_init__(self) -> None:
@@ -99,8 +100,9 @@ class VioStageConfig:
             raise ConfigError(f"vio.static_init_s must be >= 0, got {self.static_init_s}")
         if not (np.isfinite(self.wheel_sigma_m_s) and self.wheel_sigma_m_s >= 0):
             raise ConfigError(f"vio.wheel_sigma_m_s must be >= 0, got {self.wheel_sigma_m_s}")
-        if not self.max_smear_px > 0:
-            raise ConfigError(f"vio.max_smear_px must be > 0, got {self.max_smear_px}")
+        if not (self.max_smear_px > 0 and 0 <= self.track_smear_px <= self.max_smear_px):
+            raise ConfigError(f"vio.max_smear_px must be > 0 and vio.track_smear_px in [0, max_smear_px], got "
+                              f"{self.max_smear_px} and {self.track_smear_px}")
         if not (np.isfinite(self.reinit_after_s) and 0 <= self.reinit_after_s <= 60):
             raise ConfigError(f"vio.reinit_after_s must be in [0, 60] s, got {self.reinit_after_s}")
         if self.min_tracks < 0:
@@ -161,8 +163,11 @@ class VoAnchor:
 
 @dataclass
 class StaticStart:
-    """The VIO stage's static start: the first frame's tracks, the decision and its result."""
+    """The VIO stage's static start: the first frame's tracks, the decision and its result;
+    ``still_px``: the median track motion since the first frame below which the camera stood
+    still (:data:`amrvio.estimator.initializer.STILL_MRAD` in this camera's pixels)."""
 
+    still_px: float
     ids: I64 | None = None
     uv: F64 | None = None
     decided: bool = False

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from amrvio.diagnostics.frame import FrameDiagnostics
 from amrvio.diagnostics.health import FrameHealth
+from amrvio.estimator.initializer import STILL_MRAD
 from amrvio.estimator.local_mapping import LocalMapping, Segment
 from amrvio.estimator.vi_init import (
     ViBiasPrior,
@@ -57,6 +58,7 @@ from amrvio.imu.propagation import ImuBias, InertialState
 from amrvio.imu.static_init import StaticInitConfig, StaticInitResult, static_init
 from amrvio.pipeline.imu_log import ImuLog
 from amrvio.pipeline.records import BodyTrajectory, PoseStatus
+from amrvio.pipeline.vio_blur import blur_gate
 from amrvio.pipeline.vio_report import (
     BodyTrack,
     ImuSetup,
@@ -85,8 +87,6 @@ class SensorStages:
     vio: VioStage | None = None
 
 
-STILL_PX = 0.5
-"""Median track motion (px) since the first frame below which the camera stands still."""
 MAX_SOLVER_FAILURES = 3
 """Consecutive solver failures after which the smoother waits for a new initialisation."""
 NO_LANDMARKS = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))  # a restart without landmarks
@@ -110,11 +110,11 @@ class VioStage:
         self.mapping = mapping
         self.imu = ImuLog(config.dynamic_init.max_window_s + 3.0)
         self.vo_keyframes: list[tuple[int, int, int]] = []  # (t_ns, segment, kf id) of one segment
-        self.start = StaticStart()
+        self.start = StaticStart(still_px=1e-3 * STILL_MRAD * float(np.asarray(K)[0, 0]))
         self.last_init: ViInitResult | None = None
         self.anchor: VoAnchor | None = None
         self.track = BodyTrack()
-        self.still = ZeroVelocityDetector(config.zero_velocity)
+        self.still = ZeroVelocityDetector(config.zero_velocity, float(np.asarray(K)[0, 0]))
 
     @property
     def running(self) -> bool:
@@ -137,17 +137,10 @@ class VioStage:
         bias = None if newest is None else np.asarray(newest.bias.gyro_rad_s)
         return self.imu.rotation(t0_ns, t1_ns, self.setup.T_body_cam.R.T, bias)
 
-    def smeared(self, health: FrameHealth | None, events: list[str]) -> bool:
-        """Whether the gyro-predicted smear of a frame, known before tracking, is above
-        ``max_smear_px`` (logged as ``smear_gated``): the stage bridges such a frame, and the
-        tracker must not move its tracks through it either. KLT in a smear loses most tracks and
-        starts new ones on smeared corners; the smoother would come back from the burst seeing
-        none of its landmarks, its scale held only by the IMU over a few frames."""
+    def blur_gate(self, image_blurred: bool, health: FrameHealth | None, events: list[str]) -> bool:
+        """Whether the frame is too blurred to track (:func:`amrvio.pipeline.vio_blur.blur_gate`)."""
         smear = None if health is None else health.blur.smear_px_pred
-        if smear is None or not smear > self.cfg.max_smear_px:
-            return False
-        events.append("smear_gated")
-        return True
+        return blur_gate(image_blurred, smear, self.running, self.cfg, events)
 
     def process(self, index: int, inp: VioFrameInput, events: list[str]) -> VioReport:
         """The frame's report; its body pose goes into :attr:`track`; events are appended."""
@@ -284,7 +277,7 @@ class VioStage:
         common, a, b = np.intersect1d(st.ids, obs.ids, return_indices=True)
         moved = float(np.median(np.linalg.norm(obs.uv_px[b] - first_uv[a], axis=1))) if len(common) >= 10 \
             else float("inf")
-        return res if moved <= STILL_PX else None
+        return res if moved <= st.still_px else None
 
     def _start_static(self, static: StaticInitResult, t_ns: int, obs: VisualObservations) -> VioEstimate:
         R = np.asarray(static.R_world_body)

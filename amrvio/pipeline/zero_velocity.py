@@ -10,11 +10,12 @@ measurement ``v_world = 0`` with ``sigma_m_s`` to a frame's velocity when, over 
 ``window_s``:
 
 - the image says so: the median displacement of the tracks this frame shares with the frame
-  ``window_s`` earlier is at most ``max_flow_px`` (at least ``min_tracks`` of them). A slow
-  translation ``v`` at depth ``Z`` moves them ``f v window_s / Z`` px, so 0.5 px over 0.3 s is
-  at most 0.022 m/s at 3 m with f = 229 px (0.011 m/s at f = 458 px): a moving platform with
-  its scene within a few metres is not taken for still. A rotation moves every track, so turning
-  on the spot is not still either (its velocity is zero, but nothing here needs that);
+  ``window_s`` earlier is at most ``max_flow_mrad`` as an angle (px / focal length; at least
+  ``min_tracks`` of them). A slow translation ``v`` at depth ``Z`` moves them ``v window_s / Z``
+  rad whatever the resolution, so 2.2 mrad over 0.3 s is at most 0.022 m/s at 3 m (0.5 px at
+  f = 229 px, 1.0 px at f = 459 px): a moving platform with its scene within a few metres is not
+  taken for still. A rotation moves every track, so turning on the spot is not still either (its
+  velocity is zero, but nothing here needs that);
 - the IMU says so: :func:`amrvio.imu.static.detect_standstill` on the same samples (steady
   gravity direction, specific force of norm g, small mean rate) rejects an accelerating
   platform whose scene is far away.
@@ -33,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ConfigError
+from amrvio.estimator.initializer import STILL_MRAD
 from amrvio.imu.static import StandstillStatus, detect_standstill
 from amrvio.pipeline.imu_log import ImuLog
 from amrvio.types.sensors import ImuData
@@ -47,15 +49,15 @@ class ZeroVelocityConfig:
     measurement per axis (0: detection still reported, no update made)."""
 
     window_s: float = 0.3
-    max_flow_px: float = 0.5
+    max_flow_mrad: float = STILL_MRAD
     min_tracks: int = 20
     sigma_m_s: float = 0.02
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.window_s) and 0.0 < self.window_s <= 10.0):
             raise ConfigError(f"vio.zero_velocity.window_s must be in (0, 10] s, got {self.window_s}")
-        if not (np.isfinite(self.max_flow_px) and self.max_flow_px > 0):
-            raise ConfigError(f"vio.zero_velocity.max_flow_px must be > 0, got {self.max_flow_px}")
+        if not (np.isfinite(self.max_flow_mrad) and self.max_flow_mrad > 0):
+            raise ConfigError(f"vio.zero_velocity.max_flow_mrad must be > 0, got {self.max_flow_mrad}")
         if self.min_tracks < 1:
             raise ConfigError(f"vio.zero_velocity.min_tracks must be >= 1, got {self.min_tracks}")
         if not (np.isfinite(self.sigma_m_s) and self.sigma_m_s >= 0):
@@ -88,10 +90,14 @@ stamps are rounded, and the window must not flip between n and n + 1 frame perio
 
 class ZeroVelocityDetector:
     """Keeps the tracks of the recent frames; :meth:`update` judges the newest (kept as
-    :attr:`last`)."""
+    :attr:`last`). ``focal_px``: the camera's focal length, which turns the angle gate into
+    :attr:`max_flow_px`."""
 
-    def __init__(self, config: ZeroVelocityConfig) -> None:
+    def __init__(self, config: ZeroVelocityConfig, focal_px: float) -> None:
+        if not (np.isfinite(focal_px) and focal_px > 0):
+            raise ConfigError(f"the zero-velocity detector needs a focal length > 0, got {focal_px}")
         self.cfg = config
+        self.max_flow_px = 1e-3 * config.max_flow_mrad * float(focal_px)
         self._frames: deque[tuple[int, I64, F64]] = deque()
         self.last = NOT_JUDGED  # the newest verdict
 
@@ -139,7 +145,7 @@ class ZeroVelocityDetector:
             return ZeroVelocity(False, float("nan"), len(i0), None)
         flow = float(np.median(np.linalg.norm(frames[-1][2][i1] - uv0[i0], axis=1)))
         stand = detect_standstill(imu.window(t0, int(t_ns)))
-        return ZeroVelocity(flow <= cfg.max_flow_px and stand.still, flow, len(i0), stand.status)
+        return ZeroVelocity(flow <= self.max_flow_px and stand.still, flow, len(i0), stand.status)
 
 
 __all__ = ["NOT_JUDGED", "ZeroVelocity", "ZeroVelocityConfig", "ZeroVelocityDetector"]
