@@ -33,7 +33,8 @@ from amrvio.types.lie import SE3
 
 STILL_MRAD = 2.2
 """Median track motion, as an angle (px / focal length, in mrad), below which a camera counts as
-standing still: here, at the VIO's static start and in its zero-velocity detection. An angle
+standing still: in the initialiser's ``static`` label, the VIO's static start and its
+zero-velocity detection. An angle
 because the same standstill moves its tracks twice as many pixels at twice the resolution: the
 simulator's replay of EuRoC V1_01, whose MAV stands for its first seconds, moved them 0.29 px
 in 0.43 s at 376x240 (f = 229 px) and 0.54 px at 752x480 (f = 459 px), 1.2 mrad at both; the
