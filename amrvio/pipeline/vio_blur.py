@@ -23,9 +23,12 @@ frame is tracked (:mod:`amrvio.pipeline.smear_motion` needs the tracks for the d
 blurred frame of a fast translation can be tracked: on bench_vo's corridor (752x480, two 0.5 s
 blur bursts) the frames driving straight out of the second burst, 7-9 px of smear of which the
 gyro sees 0.1 px, were tracked, and the Sim3 ATE went from 0.071 % to 0.150 % of the path.
-Adding the previous frame's translational part instead kept those frames bridged (0.071 % again)
-but also the take-off's, whose translational part the smoother, just started at rest,
-overestimates: the replay's scale error went back to 3.2 %. Not solved yet.
+Adding the previous frame's translational part instead kept those frames bridged (of that
+corridor's blurred frames only three, 1.8-3.8 px, were tracked), but the replay's scale error
+went back to 3.2 % (4.1 % when an unknown translation also bridged the frame). Why is not
+established: in the take-off the translational part is unknown until the VO's map exists
+(frame 110), then 1.8-2.0 px, and rotation plus translation, 2.8-3.0 px, is close to the truth.
+Not solved yet.
 """
 
 from __future__ import annotations
