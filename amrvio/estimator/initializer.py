@@ -41,6 +41,11 @@ in 0.43 s at 376x240 (f = 229 px) and 0.54 px at 752x480 (f = 459 px), 1.2 mrad 
 old gate of 0.5 px took the static start at the first resolution and refused it at the second.
 2.2 mrad is 0.5 px at f = 229 px, 1.0 px at 459 px and 1.6 px at KITTI's 718 px."""
 
+
+def angle_px(mrad: float, focal_px: float) -> float:
+    """An angle of ``mrad`` milliradians as pixels of a camera with focal length ``focal_px``."""
+    return 1e-3 * mrad * focal_px
+
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 U8 = NDArray[np.uint8]
@@ -150,7 +155,7 @@ class Initializer:
         if len(self.history) > self.cfg.max_history:
             self.history = [self.history[0], *self.history[-self.cfg.max_history:]]
         static = (tv.status is TwoViewStatus.LOW_PARALLAX
-                  and tv.median_flow_px < 1e-3 * self.cfg.static_flow_mrad * float(self.K[0, 0]))
+                  and tv.median_flow_px < angle_px(self.cfg.static_flow_mrad, float(self.K[0, 0])))
         n_shared = int(cur_mask.sum())
         few = n_shared < max(2 * self.cfg.two_view.min_points,
                              self.cfg.min_shared_ratio * len(self.ref_ids))

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from amrvio.diagnostics.frame import FrameDiagnostics
 from amrvio.diagnostics.health import FrameHealth
-from amrvio.estimator.initializer import STILL_MRAD
+from amrvio.estimator.initializer import STILL_MRAD, angle_px
 from amrvio.estimator.local_mapping import LocalMapping, Segment
 from amrvio.estimator.vi_init import (
     ViBiasPrior,
@@ -110,11 +110,12 @@ class VioStage:
         self.mapping = mapping
         self.imu = ImuLog(config.dynamic_init.max_window_s + 3.0)
         self.vo_keyframes: list[tuple[int, int, int]] = []  # (t_ns, segment, kf id) of one segment
-        self.start = StaticStart(still_px=1e-3 * STILL_MRAD * float(np.asarray(K)[0, 0]))
+        focal_px = float(np.asarray(K)[0, 0])
+        self.start = StaticStart(still_px=angle_px(STILL_MRAD, focal_px))
         self.last_init: ViInitResult | None = None
         self.anchor: VoAnchor | None = None
         self.track = BodyTrack()
-        self.still = ZeroVelocityDetector(config.zero_velocity, float(np.asarray(K)[0, 0]))
+        self.still = ZeroVelocityDetector(config.zero_velocity, focal_px)
 
     @property
     def running(self) -> bool:

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.errors import ConfigError
-from amrvio.estimator.initializer import STILL_MRAD
+from amrvio.estimator.initializer import STILL_MRAD, angle_px
 from amrvio.imu.static import StandstillStatus, detect_standstill
 from amrvio.pipeline.imu_log import ImuLog
 from amrvio.types.sensors import ImuData
@@ -97,7 +97,7 @@ class ZeroVelocityDetector:
         if not (np.isfinite(focal_px) and focal_px > 0):
             raise ConfigError(f"the zero-velocity detector needs a focal length > 0, got {focal_px}")
         self.cfg = config
-        self.max_flow_px = 1e-3 * config.max_flow_mrad * float(focal_px)
+        self.max_flow_px = angle_px(config.max_flow_mrad, float(focal_px))
         self._frames: deque[tuple[int, I64, F64]] = deque()
         self.last = NOT_JUDGED  # the newest verdict
 
