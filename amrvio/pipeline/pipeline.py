@@ -157,8 +157,7 @@ class Pipeline:
         kf = (self._segment_id() or 0, step.keyframe.kf_id) if step.keyframe is not None else None
         t0 = time.perf_counter()
         vio = None if self.sensors.vio is None else self.sensors.vio.process(
-            index, vio_input(t_ns, imu, step.tracking.outcome, self.tracker.tracks, kf,
-                             health.blur.smear_px_pred if health is not None else None), events)
+            index, vio_input(t_ns, imu, step.tracking.outcome, self.tracker.tracks, kf, health), events)
         self._toc("vio", t0)
         segs = self.mapping.segments
         T_wc = segs[-1].pose_in_world(step.T_cam_world) if segs else se3_matrix_inverse(step.T_cam_world)

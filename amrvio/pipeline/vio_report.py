@@ -1,7 +1,5 @@
-"""Values of the visual-inertial stage (:class:`amrvio.pipeline.vio_stage.VioStage`): its
-configuration, its per-frame input, and what it reports for one frame (:class:`VioReport`, with its
-columns in ``health.csv``).
-"""
+"""Values of the visual-inertial stage (:class:`amrvio.pipeline.vio_stage.VioStage`): its configuration,
+its per-frame input, and what it reports for one frame (:class:`VioReport`, its ``health.csv`` columns)."""
 
 from __future__ import annotations
 
@@ -12,6 +10,7 @@ from enum import Enum
 import numpy as np
 from numpy.typing import NDArray
 
+from amrvio.diagnostics.health import FrameHealth
 from amrvio.errors import ConfigError
 from amrvio.estimator.vi_init import ViInitResult
 from amrvio.estimator.vio_checks import ConsistencyReport
@@ -69,14 +68,13 @@ class VioStageConfig:
     restart lost the scale the smoother's prior held: the median scale error was 1.36 % with
     restarts at once, 1.16 % after 0.5 s, 0.51 % after 2 s (none lasted that long). On MH_01
     hand-held the restarts helped (0.25 % at once, 1.28 % after 2 s; its target is 2 %);
-    ``wheel_sigma_m_s``: standard deviation
-    of the wheel-odometry velocity (forward speed, and the zero sideways and vertical speed of a
-    ground robot) when the recording has wheel odometry (0, the default: not used; a wheel file
-    does not say the platform is a ground robot; ``amrvio run --wheels`` sets 0.05);
-    ``max_smear_px``: a frame whose predicted smear (the gyro's rotation plus the translation,
-    :mod:`amrvio.pipeline.smear_motion`) is larger is bridged by the IMU (its tracks are not
-    trusted), whatever the blur gate said; ``track_smear_px``: see :mod:`amrvio.pipeline.vio_blur`;
-    ``zero_velocity``: the zero-velocity update at standstill (:mod:`amrvio.pipeline.zero_velocity`)."""
+    ``wheel_sigma_m_s``: standard deviation of the wheel-odometry velocity (forward speed, and the
+    zero sideways and vertical speed of a ground robot) when the recording has wheel odometry (0,
+    the default: not used; a wheel file does not say the platform is a ground robot; ``amrvio run
+    --wheels`` sets 0.05); ``max_smear_px``: a frame whose predicted smear (the gyro's rotation
+    plus the translation, :mod:`amrvio.pipeline.smear_motion`) is larger is bridged by the IMU
+    whatever the blur gate said (or PnP's pose, without an exposure time); ``track_smear_px``: see
+    :mod:`amrvio.pipeline.vio_blur`; ``zero_velocity``: :mod:`amrvio.pipeline.zero_velocity`."""
 
     enabled: bool = True
     imu_noise_scale: float = 1.0
@@ -114,8 +112,10 @@ class VioFrameInput:
     """One frame for the stage: ``t_ns``; ``imu``: samples since the previous frame (may overlap);
     ``usable``: the tracks were tracked into this image (not blurred, dropped or repeated);
     ``ids`` (N,) / ``uv`` (N, 2): the tracks, undistorted pinhole pixels; ``vo_keyframe``:
-    (segment, keyframe id) when the VO made this frame a keyframe; ``smear_px``: the motion
-    smear the gyro predicts for the exposure (the diagnostics'; NaN when unknown)."""
+    (segment, keyframe id) when the VO made this frame a keyframe; ``smear_px``: the motion smear
+    predicted for the exposure (the diagnostics'; NaN when unknown); ``exposure_known``: the frame
+    carries its exposure time (else the prediction assumed one); ``pnp_posed``: the tracker posed
+    the frame by PnP on its map points (outcome TRACKED)."""
 
     t_ns: int
     imu: ImuData | None
@@ -124,6 +124,8 @@ class VioFrameInput:
     uv: F64
     vo_keyframe: tuple[int, int] | None = None
     smear_px: float = float("nan")
+    exposure_known: bool = True
+    pnp_posed: bool = False
 
 
 #: tracker outcomes whose tracks the stage does not take: not moved into the frame's image, or
@@ -133,23 +135,21 @@ UNTRACKED = (TrackOutcome.SKIPPED_BLURRED, TrackOutcome.PREDICTED, TrackOutcome.
 
 
 def vio_input(t_ns: int, imu: ImuData | None, outcome: TrackOutcome, tracks: TrackSet,
-              vo_keyframe: tuple[int, int] | None, smear_px: float | None = None) -> VioFrameInput:
-    """The stage's input from the tracker's outcome and its live tracks."""
-    return VioFrameInput(t_ns, imu, outcome not in UNTRACKED, tracks.ids.copy(), tracks.pts.copy(),
-                         vo_keyframe, float("nan") if smear_px is None else float(smear_px))
+              vo_keyframe: tuple[int, int] | None, health: FrameHealth | None = None) -> VioFrameInput:
+    """The stage's input from the tracker's outcome, its live tracks and the frame's health."""
+    smear = float("nan") if health is None or health.blur.smear_px_pred is None else health.blur.smear_px_pred
+    return VioFrameInput(t_ns, imu, outcome not in UNTRACKED, tracks.ids.copy(), tracks.pts.copy(), vo_keyframe, smear,
+                         health is None or health.exposure.exposure_s is not None, outcome is TrackOutcome.TRACKED)
 
 
 @dataclass(frozen=True, slots=True)
 class ImuSetup:
-    """What the VIO stage needs beyond the camera: the IMU's noise (Kalibr densities), the camera
-    pose in the IMU body frame, and the wheel odometry of a ground robot (forward = body x), if
-    any."""
+    """What the VIO stage needs beyond the camera: the IMU's noise (Kalibr densities), the camera pose
+    in the IMU body frame, and the wheel odometry of a ground robot (forward = body x), if any."""
 
     noise: ImuNoise
     T_body_cam: SE3
     wheel: WheelData | None = None
-
-
 
 
 @dataclass(frozen=True, slots=True)

@@ -58,7 +58,7 @@ from amrvio.imu.propagation import ImuBias, InertialState
 from amrvio.imu.static_init import StaticInitConfig, StaticInitResult, static_init
 from amrvio.pipeline.imu_log import ImuLog
 from amrvio.pipeline.records import BodyTrajectory, PoseStatus
-from amrvio.pipeline.vio_blur import blur_gate
+from amrvio.pipeline.vio_blur import blur_gate, bridge_after_tracking
 from amrvio.pipeline.vio_report import (
     BodyTrack,
     ImuSetup,
@@ -150,7 +150,8 @@ class VioStage:
         zv = self.still.observe(inp.t_ns, inp.ids if inp.usable else None, inp.uv, self.imu, events)
         if not self.running:
             return self._before(index, inp, obs, events)
-        if not inp.usable or len(obs) < self.cfg.min_tracks or inp.smear_px > self.cfg.max_smear_px:
+        if not inp.usable or len(obs) < self.cfg.min_tracks or \
+                bridge_after_tracking(inp.smear_px, inp.exposure_known, inp.pnp_posed, self.cfg, events):
             est = self.backend.propagate(inp.t_ns, imu, bridged=True)
             if not est.ok or est.state is None:
                 return VioReport(VioPhase.NO_IMU, est, last_init=self.last_init, init_kind=self.track.init_kind)
