@@ -68,12 +68,12 @@ class VioStageConfig:
     restart lost the scale the smoother's prior held: the median scale error was 1.36 % with
     restarts at once, 1.16 % after 0.5 s, 0.51 % after 2 s (none lasted that long). On MH_01
     hand-held the restarts helped (0.25 % at once, 1.28 % after 2 s; its target is 2 %);
-    ``wheel_sigma_m_s``: standard deviation of the wheel-odometry velocity (forward speed, and the
-    zero sideways and vertical speed of a ground robot) when the recording has wheel odometry (0,
-    the default: not used; a wheel file does not say the platform is a ground robot; ``amrvio run
-    --wheels`` sets 0.05); ``max_smear_px``: a frame whose predicted smear (the gyro's rotation
-    plus the translation, :mod:`amrvio.pipeline.smear_motion`) is larger is bridged by the IMU
-    whatever the blur gate said (or PnP's pose, without an exposure time); ``track_smear_px``: see
+    ``wheel_sigma_m_s``: standard deviation of the wheel-odometry velocity (forward speed, and the zero sideways
+    and vertical speed of a ground robot) when the recording has wheel odometry (0, the default: not used; a
+    wheel file does not say the platform is a ground robot; ``amrvio run --wheels`` sets 0.05);
+    ``max_smear_px``: a frame whose predicted smear (the gyro's rotation plus the translation,
+    :mod:`amrvio.pipeline.smear_motion`) is larger is bridged by the IMU whatever the blur gate
+    said, except one without an exposure time that PnP posed; ``track_smear_px``: see
     :mod:`amrvio.pipeline.vio_blur`; ``zero_velocity``: :mod:`amrvio.pipeline.zero_velocity`."""
 
     enabled: bool = True
