@@ -42,8 +42,8 @@ class TrackingConfig:
     last good image and normally not tracked from; one whose PnP inliers reach
     ``blurred_reference_ratio`` times those of the last good image tracks as well as a sharp
     frame and becomes the reference (None: never), so that a long blurred stretch is not
-    tracked across an ever wider baseline; with an IMU the VIO bridges blurred frames instead
-    (:meth:`with_imu_bridge`)."""
+    tracked across an ever wider baseline; while a VIO bridges blurred frames with the IMU it is
+    never (``bridged`` of :meth:`Tracker.track`)."""
 
     klt: KltConfig = field(default_factory=KltConfig)
     direct: DirectConfig = field(default_factory=DirectConfig)
@@ -57,12 +57,6 @@ class TrackingConfig:
     retry_unpredicted: bool = True
     blurred_reference_ratio: float | None = 0.5
     scaled_relative: ScaledRelativeConfig = field(default_factory=ScaledRelativeConfig)
-
-    def with_imu_bridge(self) -> TrackingConfig:
-        """The tracker when a VIO stage bridges the blurred frames with the IMU: its last sharp
-        image stays the reference (with tracks carried on from blurred images, the smoother's
-        median scale error on EuRoC MH_01 over 4 IMU seeds was 4.7 % instead of 0.45 %)."""
-        return replace(self, blurred_reference_ratio=None)
 
 
 class Tracker:
@@ -156,13 +150,17 @@ class Tracker:
         return self._report(TrackOutcome.INIT_TRACKED, res)
 
     def track(self, img: U8, blurred: bool, m: Landmarks, segment_scale: float,
-              R_cur_ref: F64 | None = None, stale: bool = False) -> TrackStep:
+              R_cur_ref: F64 | None = None, stale: bool = False, bridged: bool = False) -> TrackStep:
         """Pose ``img`` against the map ``m`` (segment units; ``segment_scale`` global units per
         segment unit, for the speed record). ``R_cur_ref``: the camera's rotation since the
         reference image by the gyro, which replaces the motion model's in the KLT prediction.
         ``stale``: the motion model is stale (:meth:`stale`, and the map search failed): no
         direct-alignment fallback, which would start from it (a robot that turned 28 degrees
-        during a black-out was posed 27 degrees off, and the map grew in that frame)."""
+        during a black-out was posed 27 degrees off, and the map grew in that frame).
+        ``bridged``: a VIO bridges blurred frames with the IMU, so a blurred ``img`` never becomes
+        the reference: tracks carried on from blurred images took the smoother's median scale
+        error on EuRoC MH_01 over 4 IMU seeds from 0.45 % to 4.7 %. Before the VIO runs nothing
+        bridges them, and the VO's rule (``blurred_reference_ratio``) holds."""
         T_last = self.motion.T_last
         if self.prev_img is None or T_last is None:
             raise RuntimeError("Tracker: track() without a previous frame")
@@ -215,7 +213,7 @@ class Tracker:
         T_cw = pnp.T_cam_world
         n_inl = int(pnp.inliers.sum())
         obs = Observations(tr.ids[use][pnp.inliers].copy(), res.pts[use][pnp.inliers].copy())
-        ratio, ref = cfg.blurred_reference_ratio, self.ref_inliers
+        ratio, ref = None if bridged else cfg.blurred_reference_ratio, self.ref_inliers
         if blurred and (ratio is None or ref is None or n_inl < ratio * ref):
             # pose only; keep the last good image as the tracking reference
             self.gap += 1

@@ -71,8 +71,7 @@ class Pipeline:
         cfg = in_tracked_pixels(self.cfg, None if self.camera is None else self.camera.width)
         K = np.asarray(camera.pinhole().K if isinstance(camera, CameraModel) else camera, dtype=np.float64)
         vio_on = imu is not None and cfg.vio.enabled and cfg.track
-        tracking = cfg.tracking.with_imu_bridge() if vio_on else cfg.tracking
-        self.tracker = Tracker(K, tracking, cfg.seed)
+        self.tracker = Tracker(K, tracking := cfg.tracking, cfg.seed)
         self.initializer = Initializer(K, cfg.init, cfg.seed)
         self.mapping = LocalMapping(K, cfg.mapping)
         self.scale = make_scale_source(cfg.scale, cfg.seed, wheel)
@@ -283,7 +282,8 @@ class Pipeline:
             self.recovery.give_up()
             if reloc is not None:
                 return reloc
-        step = self.tracker.track(img, blurred, seg.mapper.map, seg.world_from_segment.s, R_cur_ref, stale)
+        bridged = self.sensors.vio is not None and self.sensors.vio.running  # blurred frames are the IMU's
+        step = self.tracker.track(img, blurred, seg.mapper.map, seg.world_from_segment.s, R_cur_ref, stale, bridged)
         rep = step.report
         if rep.direct_prior:
             events.append("direct_prior")
