@@ -232,6 +232,8 @@ HELP: dict[str, str] = {
     "vio.reinit_after_s": "a scale or bias-drift check must fail this long before it re-initialises (s; 0: at once)",
     "vio.dynamic_init.max_scale_rel_std": "scale std / scale the dynamic initialisation must reach",
     "vio.dynamic_init.max_gravity_std_deg": "gravity-direction std the dynamic initialisation must reach (deg)",
+    "vio.dynamic_init.max_scale_drift": "largest change of the VO's scale across the initialisation window "
+                                        "(0.1: 10 %; a drifting window is cut to its newer half)",
     "vio.max_smear_px": "predicted smear (px, rotation + translation) above which the IMU bridges a frame "
                         "(after tracking, without exposure times: unless PnP posed it)",
     "vio.track_smear_px": "while the VIO runs, a frame the blur score calls blurred is tracked if its predicted "

@@ -15,7 +15,10 @@ world frame) with their stamps, the IMU samples that cover them and ``T_body_cam
    BAD_GRAVITY_NORM);
 5. gravity refined on its sphere, then the accelerometer bias with its prior
    (amrvio.estimator.vi_init_linear);
-6. MAP refinement with bias priors and the marginal covariance (amrvio.estimator.vi_init_map):
+6. the VO's scale drift across the window (:func:`amrvio.estimator.vi_init_linear.scale_drift`):
+   SCALE_DRIFT when the scale at the window's end differs from its start's by more than
+   ``max_scale_drift``, by 3 of its standard deviations at least;
+7. MAP refinement with bias priors and the marginal covariance (amrvio.estimator.vi_init_map):
    NEGATIVE_SCALE, IMPLAUSIBLE_BIAS, SCALE_UNCERTAIN when the scale's standard deviation is
    above ``max_scale_rel_std``, GRAVITY_UNCERTAIN when the gravity direction's is above
    ``max_gravity_std_deg``.
@@ -40,6 +43,7 @@ from amrvio.estimator.vi_init_linear import (
     ViProblem,
     rotation_errors,
     rotation_range,
+    scale_drift,
     solve_free_gravity,
     solve_gyro_bias,
     solve_inverse_scale,
@@ -229,6 +233,12 @@ def _solve(problem: ViProblem, cfg: ViInitConfig, pri: BiasPriors, bg: F64, rot_
     with_ba = solve_inverse_scale(problem, bg, W, sphere.scale, sphere.gravity_vo, G, (pri.accel_mean, pri.accel_std))
     if not 0.0 < with_ba.scale < math.inf:
         return _done(S.NEGATIVE_SCALE if status is S.OK else status, cfg, ex, fig)
+    drift, drift_std = scale_drift(problem, bg, W, (pri.accel_mean, pri.accel_std))
+    fig = dataclasses.replace(fig, scale_drift=drift, scale_drift_std=drift_std)
+    if status is S.OK and abs(drift) > cfg.gates.max_scale_drift and abs(drift) > 3.0 * drift_std:
+        status = S.SCALE_DRIFT
+        if not cfg.solve_degenerate:
+            return _done(status, cfg, ex, fig)
     # VO rotation noise: a first guess (an interval's residual holds two keyframes' noise);
     # VO position noise: from three-keyframe residuals, kept
     noise0 = NoiseModel(rotation_var=max(0.0, float(np.mean(rot_err**2)) - imu_rot) / 2.0,

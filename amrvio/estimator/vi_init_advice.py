@@ -150,6 +150,12 @@ def advice(status: ViInitStatus, cfg: ViInitConfig, ex: ViExcitation | None,
         else:
             why = "scale is not observable: too little acceleration change (constant velocity or rest)"
         return f"{why}; {_move_advice(ex, cfg, g.min_accel_std_m_s2)}"
+    if status is S.SCALE_DRIFT and fig is not None:
+        span = fmt_num(ex.duration_s if ex else math.nan, 1)
+        return (f"the VO's scale changes by {fmt_num(100 * fig.scale_drift, 1)} % (+- "
+                f"{fmt_num(100 * fig.scale_drift_std, 1)}) across the {span} s window "
+                f"({100 * g.max_scale_drift:g} % allowed): one scale fits neither end; the next window "
+                "starts later. Keep the scene textured and near, and avoid pure rotation")
     if status is S.NEGATIVE_SCALE:
         return ("the VO translation runs against what the accelerometer measured (negative scale): "
                 + CHECK_SETUP)

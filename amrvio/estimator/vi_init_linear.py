@@ -18,6 +18,7 @@ section IV-C), with a prior that keeps it bounded when the motion cannot separat
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -233,6 +234,44 @@ def solve_inverse_scale(
         pos_rms = float(np.sqrt(np.mean(resid[:, 3:6] ** 2))) / abs(lam)  # metric
         sol = LinearSolution(1.0 / lam, g_vec, v, ba, cond, pos_rms)
     return sol
+
+
+def scale_drift(problem: ViProblem, gyro_bias: F64, W: F64, accel_prior: tuple[F64, F64]) -> tuple[float, float]:
+    """How much the VO's scale changes across the window: the free-gravity system of
+    :func:`solve_free_gravity`, with the accelerometer bias and its prior (mean (3,), std (3,)) as
+    in :func:`solve_inverse_scale`, and the scale linear in time: s(t) = s0 (1 + d tau), tau from
+    -1/2 at the first keyframe to +1/2 at the last (each interval's VO step at its midpoint's
+    scale). Returns (d, its standard deviation): d = 0.1 is a VO whose metres per unit grew by
+    10 % from the window's start to its end; a single scale then fits neither end. The standard
+    deviation is from the whitened normal equations, scaled by the residual's chi2 per degree of
+    freedom when that is above 1."""
+    ba0 = np.asarray(problem.pre[0].accel_bias_m_s2)
+    a_s, a_g, a_v0, a_v1, rhs = _rows(problem, gyro_bias, ba0)
+    dt = np.array([p.dt_s for p in problem.pre])
+    total = float(dt.sum())
+    if total <= 0.0:
+        return float("nan"), float("nan")
+    tau = (np.cumsum(dt) - 0.5 * dt) / total - 0.5
+    J_ba = np.stack([p.d_bias[3:9, 3:6] for p in problem.pre])
+    layout = _layout(a_s, a_g, a_v0, a_v1, np.concatenate([-J_ba, (a_s * tau[:, None])[:, :, None]], axis=2))
+    n = layout.shape[2]
+    prior_rows = np.zeros((3, n))
+    prior_rows[:, n - 4:n - 1] = np.diag(1.0 / accel_prior[1])
+    prior_rhs = (accel_prior[0] - ba0) / accel_prior[1]
+    x, _, _ = _solve(layout, rhs, W, prior_rows, prior_rhs)
+    M = layout.shape[0]
+    A = np.vstack([np.einsum("mij,mjn->min", W, layout).reshape(M * 6, n), prior_rows])
+    r = np.concatenate([np.einsum("mij,mj->mi", W, rhs).reshape(M * 6), prior_rhs]) - A @ x
+    dof = A.shape[0] - n
+    if dof <= 0 or not 0.0 < x[0] < math.inf:
+        return float("nan"), float("nan")
+    norms = np.linalg.norm(A, axis=0)
+    norms[norms == 0.0] = 1.0
+    cov = np.linalg.pinv((A / norms).T @ (A / norms)) / np.outer(norms, norms) * max(float(r @ r) / dof, 1.0)
+    # d = x_d / x_0, to first order in both
+    J = np.array([-x[-1] / x[0] ** 2, 1.0 / x[0]])
+    C = cov[np.ix_([0, n - 1], [0, n - 1])]
+    return float(x[-1] / x[0]), float(np.sqrt(max(float(J @ C @ J), 0.0)))
 
 
 def vo_position_var(problem: ViProblem, gyro_bias: F64, accel_bias: F64, scale: float, gravity_vo: F64) -> float:

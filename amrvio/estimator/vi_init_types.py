@@ -30,6 +30,7 @@ class ViInitStatus(enum.Enum):
     IMPLAUSIBLE_BIAS = "implausible_bias"  # a bias beyond max_gyro_bias / max_accel_bias
     SCALE_UNCERTAIN = "scale_uncertain"  # the scale's standard deviation is above max_scale_rel_std
     GRAVITY_UNCERTAIN = "gravity_uncertain"  # the gravity direction's std is above max_gravity_std_deg
+    SCALE_DRIFT = "scale_drift"  # the VO's scale changes across the window by more than max_scale_drift
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,7 +44,9 @@ class ViInitGates:
     ``min_translation_snr``: the VO camera must travel this many times its jitter (checked before
     solving, with the acceleration: an IMU on a vibrating platform at rest shows acceleration
     spread without motion); ``max_scale_rel_std``: scale standard deviation / scale (0.8 %: a 2 % error is 2.5 standard
-    deviations); ``max_gravity_std_deg``: standard deviation of the gravity direction (1 deg is 3)."""
+    deviations); ``max_gravity_std_deg``: standard deviation of the gravity direction (1 deg is 3);
+    ``max_scale_drift``: how much the VO's scale may change from the window's first keyframe to its
+    last (0.1: one scale is then within 5 % of either end's)."""
 
     min_accel_std_m_s2: float = 0.25
     min_translation_snr: float = 10.0
@@ -55,6 +58,7 @@ class ViInitGates:
     max_accel_bias_m_s2: float = 0.6
     max_scale_rel_std: float = 0.008
     max_gravity_std_deg: float = 0.33
+    max_scale_drift: float = 0.1
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,6 +132,8 @@ class ViInitFigures:
     accel_noise_factor: float = float("nan")
     chi2_per_dof: float = float("nan")
     iterations: int = 0
+    scale_drift: float = float("nan")
+    scale_drift_std: float = float("nan")
 
 
 @dataclass(frozen=True, slots=True, eq=False)

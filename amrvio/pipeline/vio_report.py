@@ -33,23 +33,23 @@ class DynamicInitConfig:
     """The VIO stage's dynamic initialisation: ``min_keyframes`` / ``max_window_s``: the VO
     keyframes it needs, and the longest span it uses; ``max_scale_rel_std`` /
     ``max_gravity_std_deg``: the scale std / scale and gravity-direction std it accepts (looser
-    than the initialiser's own gates for a lone window: the smoother refines both afterwards)."""
+    than the initialiser's own gates for a lone window: the smoother refines both afterwards);
+    ``max_scale_drift``: the VO's scale change across the window it accepts (else: its newer half)."""
 
     min_keyframes: int = 8
     max_window_s: float = 10.0
     max_scale_rel_std: float = 0.015
     max_gravity_std_deg: float = 1.0
+    max_scale_drift: float = 0.1
 
     def __post_init__(self) -> None:
         if not 3 <= self.min_keyframes <= 1000:
             raise ConfigError(f"vio.dynamic_init.min_keyframes must be in [3, 1000], got {self.min_keyframes}")
         if not (np.isfinite(self.max_window_s) and self.max_window_s >= 1.0):
             raise ConfigError(f"vio.dynamic_init.max_window_s must be >= 1 s, got {self.max_window_s}")
-        if not 0 < self.max_scale_rel_std < 1:
-            raise ConfigError(f"vio.dynamic_init.max_scale_rel_std must be in (0, 1), got {self.max_scale_rel_std}")
-        if not 0 < self.max_gravity_std_deg < 90:
-            raise ConfigError(f"vio.dynamic_init.max_gravity_std_deg must be in (0, 90), "
-                              f"got {self.max_gravity_std_deg}")
+        for name, hi in (("max_scale_rel_std", 1.0), ("max_gravity_std_deg", 90.0), ("max_scale_drift", 10.0)):
+            if not 0 < getattr(self, name) < hi:
+                raise ConfigError(f"vio.dynamic_init.{name} must be in (0, {hi:g}), got {getattr(self, name)}")
 
 
 @dataclass(frozen=True, slots=True)

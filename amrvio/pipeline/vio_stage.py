@@ -104,7 +104,8 @@ class VioStage:
         base = init_config or ViInitConfig()
         self.init_cfg = dataclasses.replace(base, gates=dataclasses.replace(
             base.gates, max_scale_rel_std=config.dynamic_init.max_scale_rel_std,
-            max_gravity_std_deg=config.dynamic_init.max_gravity_std_deg))
+            max_gravity_std_deg=config.dynamic_init.max_gravity_std_deg,
+            max_scale_drift=config.dynamic_init.max_scale_drift))
         self.backend = VioBackend(VioConfig(imu=setup.noise, imu_noise_scale=config.imu_noise_scale,
                                             window_keyframes=config.window_keyframes), K, setup.T_body_cam)
         self.mapping = mapping
@@ -319,6 +320,8 @@ class VioStage:
                 events.append(f"vi_init_wheel:scale={scale:.5g}:imu_status={res.status.value}")
         if use is None or use.state is None:
             events.append(f"vi_init_failed:{res.status.value}")
+            if res.status is ViInitStatus.SCALE_DRIFT:  # the older half's VO scale is not the newer's
+                self.vo_keyframes = kfs[len(kfs) // 2:]
             return res
         st = use.state
         s, R_wv = scale, np.asarray(st.R_world_vo)

@@ -267,3 +267,40 @@ def test_translation_snr_tells_a_still_camera_from_a_moving_one() -> None:
     moving = translation_snr(np.hstack([0.5 * t**2, 0.1 * t, 0 * t]) + noise)
     assert moving > 100.0
     assert translation_snr(np.zeros((5, 3))) == 0.0
+
+
+def _drifted(case: ViCase, d: float) -> np.ndarray:
+    """The case's VO poses with a unit that drifts: each keyframe interval's VO step is the metric
+    step over s (1 + d tau), tau from -1/2 (first keyframe) to +1/2 (last) at the interval's
+    midpoint, so that d = 0.2 is a VO whose metres-per-unit grew by 20 % across the window."""
+    T = np.array(case.T_vo_cam)
+    t = (case.stamps_ns - case.stamps_ns[0]) * 1e-9
+    tau = 0.5 * (t[1:] + t[:-1]) / t[-1] - 0.5
+    steps = np.diff(T[:, :3, 3], axis=0) / (1.0 + d * tau)[:, None]
+    T[1:, :3, 3] = T[0, :3, 3] + np.cumsum(steps, axis=0)
+    return T
+
+
+def test_a_vo_whose_scale_drifts_across_the_window_is_scale_drift(exact_handheld: ViCase) -> None:
+    assert ViInitConfig().gates.max_scale_drift == 0.1
+    res = _run(exact_handheld)
+    assert res.status is ViInitStatus.OK and res.figures is not None
+    assert abs(res.figures.scale_drift) < 1e-3  # exact data: no drift
+    for d in (0.2, -0.3):
+        drifted = dataclasses.replace(exact_handheld, T_vo_cam=_drifted(exact_handheld, d))
+        res = _run(drifted)
+        assert res.figures is not None and res.figures.scale_drift == pytest.approx(d, abs=2e-3)
+        assert res.status is ViInitStatus.SCALE_DRIFT and "scale changes by" in res.advice
+        assert res.state is None  # not solved further
+        looser = dataclasses.replace(ViInitConfig(), gates=dataclasses.replace(ViInitConfig().gates,
+                                                                                max_scale_drift=0.5))
+        assert _run(drifted, looser).status is not ViInitStatus.SCALE_DRIFT
+    # with noise: the drift it reports is within 3 of its standard deviations of the truth, and a
+    # drift under the gate passes
+    noisy = motion_case("handheld", 0.0, 3.0, pos_sigma_m=0.001, rot_sigma_deg=0.05, seed=4)
+    for d in (0.0, 0.05, 0.25):
+        res = _run(dataclasses.replace(noisy, T_vo_cam=_drifted(noisy, d)))
+        fig = res.figures
+        assert fig is not None and 0 < fig.scale_drift_std < 0.05
+        assert abs(fig.scale_drift - d) < 3 * fig.scale_drift_std
+        assert (res.status is ViInitStatus.SCALE_DRIFT) == (d > 0.1), (d, res.status)
