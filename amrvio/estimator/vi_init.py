@@ -78,7 +78,7 @@ F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 
 __all__ = ["ViBiasPrior", "ViExcitation", "ViInitConfig", "ViInitFigures", "ViInitResult", "ViInitState",
-           "ViInitStatus", "bias_prior_from_static", "initialize_vi"]
+           "ViInitStatus", "bias_prior_from_static", "initialize_vi", "next_window_start"]
 
 LINEAR_POSITION_SIGMA_M = 0.01
 """Keyframe position noise assumed by the first linear solve; later steps estimate it."""
@@ -203,6 +203,14 @@ def initialize_vi(
         if not cfg.solve_degenerate:
             return _done(status, cfg, ex, fig)
     return _solve(problem, cfg, pri, bg, rot_err, status, ex, fig, st)
+
+
+def next_window_start(result: ViInitResult, n_keyframes: int) -> int:
+    """Where the next attempt's window should start among this attempt's ``n_keyframes``: past
+    the older half when the VO's scale drifted across the window (SCALE_DRIFT: growing the window
+    cannot fix it, a newer one may not drift), else at the first (more keyframes may be what it
+    lacked)."""
+    return n_keyframes // 2 if result.status is ViInitStatus.SCALE_DRIFT else 0
 
 
 def _solve(problem: ViProblem, cfg: ViInitConfig, pri: BiasPriors, bg: F64, rot_err: F64, status: ViInitStatus,

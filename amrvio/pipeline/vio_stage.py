@@ -45,6 +45,7 @@ from amrvio.estimator.vi_init import (
     ViInitStatus,
     bias_prior_from_static,
     initialize_vi,
+    next_window_start,
 )
 from amrvio.estimator.vio_backend import VioBackend
 from amrvio.estimator.vio_types import (
@@ -320,8 +321,7 @@ class VioStage:
                 events.append(f"vi_init_wheel:scale={scale:.5g}:imu_status={res.status.value}")
         if use is None or use.state is None:
             events.append(f"vi_init_failed:{res.status.value}")
-            if res.status is ViInitStatus.SCALE_DRIFT:  # the older half's VO scale is not the newer's
-                self.vo_keyframes = kfs[len(kfs) // 2:]
+            self.vo_keyframes = kfs[next_window_start(res, len(kfs)):]
             return res
         st = use.state
         s, R_wv = scale, np.asarray(st.R_world_vo)

@@ -18,6 +18,7 @@ from amrvio.estimator.vi_init import (
     ViInitStatus,
     bias_prior_from_static,
     initialize_vi,
+    next_window_start,
 )
 from amrvio.estimator.vi_init_advice import translation_snr
 from amrvio.imu.static_init import StaticInitStatus, static_init
@@ -286,12 +287,14 @@ def test_a_vo_whose_scale_drifts_across_the_window_is_scale_drift(exact_handheld
     res = _run(exact_handheld)
     assert res.status is ViInitStatus.OK and res.figures is not None
     assert abs(res.figures.scale_drift) < 1e-3  # exact data: no drift
+    assert next_window_start(res, 31) == 0
     for d in (0.2, -0.3):
         drifted = dataclasses.replace(exact_handheld, T_vo_cam=_drifted(exact_handheld, d))
         res = _run(drifted)
         assert res.figures is not None and res.figures.scale_drift == pytest.approx(d, abs=2e-3)
         assert res.status is ViInitStatus.SCALE_DRIFT and "scale changes by" in res.advice
         assert res.state is None  # not solved further
+        assert next_window_start(res, 31) == 15  # the next window starts past the older half
         looser = dataclasses.replace(ViInitConfig(), gates=dataclasses.replace(ViInitConfig().gates,
                                                                                 max_scale_drift=0.5))
         assert _run(drifted, looser).status is not ViInitStatus.SCALE_DRIFT
