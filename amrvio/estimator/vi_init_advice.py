@@ -87,14 +87,24 @@ def measure_excitation(
 
 
 def translation_snr(c_vo: F64) -> float:
-    """Largest distance of the VO camera from its mean position over its jitter, the RMS of its
-    second differences / sqrt(6) (white noise of sigma per keyframe gives sqrt(6) sigma)."""
+    """Largest distance of the VO camera from its mean position over its jitter. The jitter is
+    the smallest of the RMS differences of orders 2, 3 and 4 over its white-noise gain
+    (sqrt(6), sqrt(20), sqrt(70)): each is sigma for white noise of sigma per keyframe, and a
+    smooth motion's n-th difference is its n-th derivative times the keyframe interval to the
+    n-th, which the next order shrinks while that interval is short against the motion's
+    period. With the second order alone the figure measured the motion itself as keyframes grew
+    sparse: on EuRoC MH_01's exact ground truth over its first 3 s, 41 with a keyframe every
+    0.1 s, 10.5 every 0.2 s and 4.8 every 0.3 s, under the gate of 10 (with orders 2-4: 221, 49
+    and 13); a still camera's white noise reads 1.7 (median), at most 4.8 over 1000 draws."""
     c = np.asarray(c_vo, dtype=np.float64)
-    span = float(np.max(np.linalg.norm(c - c.mean(axis=0), axis=1)))
     if c.shape[0] < 3:
         return 0.0
-    d2 = c[2:] - 2.0 * c[1:-1] + c[:-2]
-    jitter = float(np.sqrt(np.mean(np.sum(d2**2, axis=1)) / 6.0))
+    span = float(np.max(np.linalg.norm(c - c.mean(axis=0), axis=1)))
+    jitter = math.inf
+    for order, gain in ((2, 6.0), (3, 20.0), (4, 70.0)):
+        if c.shape[0] > order:
+            d = np.diff(c, n=order, axis=0)
+            jitter = min(jitter, float(np.sqrt(np.mean(np.sum(d**2, axis=1)) / gain)))
     if jitter == 0.0:
         return math.inf if span > 0.0 else 0.0
     return span / jitter

@@ -99,8 +99,9 @@ class ViExcitation:
     and z (forward) axes; rotation_range_deg: largest angle between two keyframe orientations;
     rotation_range_cam_deg (3,): range of the rotation about the first camera's x, y, z axes;
     translation_snr: how far the VO camera travels (largest distance from its mean position) over
-    its keyframe-to-keyframe jitter (RMS second difference / sqrt(6)): about 3 for a camera at rest
-    or only rotating, hundreds for a camera that moves; scale needs the camera to translate.
+    its keyframe-to-keyframe jitter (the smallest RMS difference of orders 2-4 over its white-noise
+    gain: :func:`amrvio.estimator.vi_init_advice.translation_snr`): under 5 for a camera at rest
+    or only rotating, tens to hundreds for a camera that moves; scale needs the camera to translate.
     """
 
     duration_s: float
