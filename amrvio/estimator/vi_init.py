@@ -215,7 +215,7 @@ def next_window_start(result: ViInitResult, n_keyframes: int) -> int:
 
 def _solve(problem: ViProblem, cfg: ViInitConfig, pri: BiasPriors, bg: F64, rot_err: F64, status: ViInitStatus,
            ex: ViExcitation, fig: ViInitFigures, stamps_ns: I64) -> ViInitResult:
-    """Steps 4 to 6 of the module docstring."""
+    """Steps 4 to 7 of the module docstring."""
     S = ViInitStatus
     imu_rot = float(np.mean([np.trace(p.covariance[0:3, 0:3]) / 3.0 for p in problem.pre]))
     imu_pos = float(np.mean([np.trace(p.covariance[6:9, 6:9]) / 3.0 for p in problem.pre]))
