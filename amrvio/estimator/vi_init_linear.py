@@ -121,16 +121,22 @@ def tangent_basis(g_dir: F64) -> F64:
     return np.stack([b1, np.cross(g_dir, b1)], axis=1)
 
 
-def _solve(A_raw: F64, b_raw: F64, W: F64, extra_rows: F64 | None = None,
-           extra_rhs: F64 | None = None) -> tuple[F64, float, F64]:
-    """Whiten the per-interval system A_raw (M, 6, n) x = b_raw (M, 6) with W (M, 6, 6), append the
-    (already whitened) ``extra_rows``, and solve it by the column-equilibrated normal equations;
-    returns (x, condition number of the equilibrated system, unwhitened residual (M, 6))."""
+def _whiten(A_raw: F64, b_raw: F64, W: F64, extra_rows: F64 | None = None,
+            extra_rhs: F64 | None = None) -> tuple[F64, F64]:
+    """The per-interval system A_raw (M, 6, n) x = b_raw (M, 6) whitened with W (M, 6, 6) and
+    stacked, with the (already whitened) ``extra_rows`` appended."""
     M = A_raw.shape[0]
     A = np.einsum("mij,mjn->min", W, A_raw).reshape(M * 6, -1)
     b = np.einsum("mij,mj->mi", W, b_raw).reshape(M * 6)
     if extra_rows is not None and extra_rhs is not None:
         A, b = np.vstack([A, extra_rows]), np.concatenate([b, extra_rhs])
+    return A, b
+
+
+def _equilibrated(A: F64, b: F64) -> tuple[F64, float, F64, F64]:
+    """Solve the whitened A x = b by the column-equilibrated normal equations; returns (x, the
+    condition number, the equilibrated normal matrix N, the column norms: cov(x) = N^-1 / (norms
+    norms^T) for unit-variance rows)."""
     norms = np.linalg.norm(A, axis=0)
     norms[norms == 0.0] = 1.0
     An = A / norms
@@ -138,7 +144,14 @@ def _solve(A_raw: F64, b_raw: F64, W: F64, extra_rows: F64 | None = None,
     eig = np.linalg.eigvalsh(N)
     cond = float(np.sqrt(eig[-1] / eig[0])) if eig[0] > 0 else float("inf")
     y, *_ = np.linalg.lstsq(N, An.T @ b, rcond=None)
-    x = y / norms
+    return y / norms, cond, N, norms
+
+
+def _solve(A_raw: F64, b_raw: F64, W: F64, extra_rows: F64 | None = None,
+           extra_rhs: F64 | None = None) -> tuple[F64, float, F64]:
+    """Whiten the per-interval system (:func:`_whiten`) and solve it (:func:`_equilibrated`);
+    returns (x, condition number of the equilibrated system, unwhitened residual (M, 6))."""
+    x, cond, _, _ = _equilibrated(*_whiten(A_raw, b_raw, W, extra_rows, extra_rhs))
     resid = b_raw - np.einsum("min,n->mi", A_raw, x)
     return x, cond, resid
 
@@ -258,16 +271,13 @@ def scale_drift(problem: ViProblem, gyro_bias: F64, W: F64, accel_prior: tuple[F
     prior_rows = np.zeros((3, n))
     prior_rows[:, n - 4:n - 1] = np.diag(1.0 / accel_prior[1])
     prior_rhs = (accel_prior[0] - ba0) / accel_prior[1]
-    x, _, _ = _solve(layout, rhs, W, prior_rows, prior_rhs)
-    M = layout.shape[0]
-    A = np.vstack([np.einsum("mij,mjn->min", W, layout).reshape(M * 6, n), prior_rows])
-    r = np.concatenate([np.einsum("mij,mj->mi", W, rhs).reshape(M * 6), prior_rhs]) - A @ x
+    A, b = _whiten(layout, rhs, W, prior_rows, prior_rhs)
+    x, _, N, norms = _equilibrated(A, b)
+    r = b - A @ x
     dof = A.shape[0] - n
     if dof <= 0 or not 0.0 < x[0] < math.inf:
         return float("nan"), float("nan")
-    norms = np.linalg.norm(A, axis=0)
-    norms[norms == 0.0] = 1.0
-    cov = np.linalg.pinv((A / norms).T @ (A / norms)) / np.outer(norms, norms) * max(float(r @ r) / dof, 1.0)
+    cov = np.linalg.pinv(N) / np.outer(norms, norms) * max(float(r @ r) / dof, 1.0)
     # d = x_d / x_0, to first order in both
     J = np.array([-x[-1] / x[0] ** 2, 1.0 / x[0]])
     C = cov[np.ix_([0, n - 1], [0, n - 1])]

@@ -71,13 +71,14 @@ class Pipeline:
         cfg = in_tracked_pixels(self.cfg, None if self.camera is None else self.camera.width)
         K = np.asarray(camera.pinhole().K if isinstance(camera, CameraModel) else camera, dtype=np.float64)
         vio_on = imu is not None and cfg.vio.enabled and cfg.track
-        self.tracker = Tracker(K, tracking := cfg.tracking, cfg.seed)
+        self.tracker = Tracker(K, cfg.tracking, cfg.seed)
         self.initializer = Initializer(K, cfg.init, cfg.seed)
         self.mapping = LocalMapping(K, cfg.mapping)
         self.scale = make_scale_source(cfg.scale, cfg.seed, wheel)
         self.recovery = MapRecovery(K, cfg.recovery, cfg.seed, cfg.tracking.klt.max_width_px)
-        self.composer = TrajectoryComposer(K, RefineGates(cfg.output.final_refine, tracking.min_pnp_inliers,
-                                                          tracking.huber_px, tracking.pnp_thresh_px))
+        tr = cfg.tracking
+        self.composer = TrajectoryComposer(K, RefineGates(cfg.output.final_refine, tr.min_pnp_inliers, tr.huber_px,
+                                                          tr.pnp_thresh_px))
         vio = VioStage(cfg.vio, K, imu, self.mapping) if vio_on and imu is not None else None
         self.sensors = SensorStages(diagnostics, vio)
         self.blur = BlurScorer(cfg.diagnostics.blur)
