@@ -161,15 +161,22 @@ def initialize_vi(
     noise: ImuNoise,
     config: ViInitConfig | None = None,
     prior: ViBiasPrior | None = None,
+    scale_prior: tuple[float, float] | None = None,
 ) -> ViInitResult:
     """Initialise from K keyframes: ``stamps_ns`` (K,) int, ``T_vo_cam`` (K, 4, 4) up-to-scale
     camera poses, ``imu`` covering [stamps_ns[0], stamps_ns[-1]], ``T_body_cam`` the camera pose in
     the IMU frame (metric), ``noise`` the IMU's densities. ``prior``: bias prior (for example from
-    a static initialisation); without it, zero-mean priors of the config's sigmas. Raises
-    ShapeError for malformed arrays; every estimation failure is a status (module docstring)."""
+    a static initialisation); without it, zero-mean priors of the config's sigmas.
+    ``scale_prior``: (mean, std) of the scale from another sensor (wheel odometry), a prior of
+    every solve from step 4 on: where the IMU cannot see the scale (constant velocity) it holds
+    the scale, so that gravity, velocities and biases are solved at a metric one (the status
+    still says what the IMU saw). Raises ShapeError for malformed arrays and a scale prior that
+    is not two positive finite numbers; every estimation failure is a status (module docstring)."""
     cfg = ViInitConfig() if config is None else config
     S = ViInitStatus
     st, T = _checked(stamps_ns, T_vo_cam)
+    if scale_prior is not None and not (len(scale_prior) == 2 and all(0.0 < float(v) < math.inf for v in scale_prior)):
+        raise ShapeError(f"initialize_vi: scale_prior must be (mean, std), both positive and finite, got {scale_prior}")
     K = st.shape[0]
     duration = (int(st[-1]) - int(st[0])) * 1e-9 if K else 0.0
     if K < max(cfg.min_keyframes, 3) or duration < cfg.min_duration_s:
@@ -179,7 +186,7 @@ def initialize_vi(
     gap = _imu_gap(imu, int(st[0]), int(st[-1]))
     if gap:
         return _done(S.IMU_MISSING, cfg, None, None, detail=gap)
-    pri = _priors(cfg, prior, noise)
+    pri = dataclasses.replace(_priors(cfg, prior, noise), scale=scale_prior)
     R_vo_body = np.einsum("nij,jk->nik", T[:, :3, :3], T_body_cam.inverse().R)
     pre = preintegrate_between(imu, st, pri.gyro_mean, pri.accel_mean, None)
     problem = ViProblem(R_vo_body, T[:, :3, 3].copy(), np.asarray(T_body_cam.t, dtype=np.float64), pre)
@@ -220,10 +227,12 @@ def _solve(problem: ViProblem, cfg: ViInitConfig, pri: BiasPriors, bg: F64, rot_
     imu_rot = float(np.mean([np.trace(p.covariance[0:3, 0:3]) / 3.0 for p in problem.pre]))
     imu_pos = float(np.mean([np.trace(p.covariance[6:9, 6:9]) / 3.0 for p in problem.pre]))
     # metric solve for a first scale and the keyframes' position noise, then the inverse-scale one
-    first = solve_free_gravity(problem, bg, whiteners(problem, LINEAR_POSITION_SIGMA_M**2))
+    sp = pri.scale
+    first = solve_free_gravity(problem, bg, whiteners(problem, LINEAR_POSITION_SIGMA_M**2), sp)
     pos_var = max(MIN_POSITION_VAR, first.position_rms_m**2 - imu_pos)
     W = whiteners(problem, pos_var)
-    lin = solve_inverse_scale(problem, bg, W, first.scale, first.gravity_vo, None) if first.scale > 0 else first
+    lin = solve_inverse_scale(problem, bg, W, first.scale, first.gravity_vo, None, scale_prior=sp) \
+        if first.scale > 0 else first
     G = cfg.gravity_m_s2
     g_norm = float(np.linalg.norm(lin.gravity_vo))
     fig = dataclasses.replace(fig, condition_number=lin.condition_number, gravity_norm_residual_m_s2=g_norm - G,
@@ -237,8 +246,9 @@ def _solve(problem: ViProblem, cfg: ViInitConfig, pri: BiasPriors, bg: F64, rot_
     if status is not S.OK and not cfg.solve_degenerate:
         return _done(status, cfg, ex, fig)
 
-    sphere = solve_inverse_scale(problem, bg, W, lin.scale, lin.gravity_vo, G)
-    with_ba = solve_inverse_scale(problem, bg, W, sphere.scale, sphere.gravity_vo, G, (pri.accel_mean, pri.accel_std))
+    sphere = solve_inverse_scale(problem, bg, W, lin.scale, lin.gravity_vo, G, scale_prior=sp)
+    with_ba = solve_inverse_scale(problem, bg, W, sphere.scale, sphere.gravity_vo, G, (pri.accel_mean, pri.accel_std),
+                                  scale_prior=sp)
     if not 0.0 < with_ba.scale < math.inf:
         return _done(S.NEGATIVE_SCALE if status is S.OK else status, cfg, ex, fig)
     drift, drift_std = scale_drift(problem, bg, W, (pri.accel_mean, pri.accel_std))

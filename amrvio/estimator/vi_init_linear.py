@@ -174,12 +174,23 @@ def _layout(a_s: F64, a_g: F64, a_v0: F64, a_v1: F64, extra: F64 | None) -> F64:
     return out
 
 
-def solve_free_gravity(problem: ViProblem, gyro_bias: F64, W: F64) -> LinearSolution:
+def _scale_row(n: int, value: float, std: float) -> tuple[F64, F64]:
+    """One whitened prior row on the first unknown of ``n``: (x[0] - value) / std."""
+    row = np.zeros((1, n))
+    row[0, 0] = 1.0 / std
+    return row, np.array([value / std])
+
+
+def solve_free_gravity(problem: ViProblem, gyro_bias: F64, W: F64,
+                       scale_prior: tuple[float, float] | None = None) -> LinearSolution:
     """Scale, gravity (3 free components) and velocities; accelerometer bias at the
-    preintegration's (Qin et al. 2018, eq. 11)."""
+    preintegration's (Qin et al. 2018, eq. 11). ``scale_prior``: (mean, std) of the scale from
+    another sensor, as one more row."""
     ba = np.asarray(problem.pre[0].accel_bias_m_s2)
     a_s, a_g, a_v0, a_v1, rhs = _rows(problem, gyro_bias, ba)
-    x, cond, resid = _solve(_layout(a_s, a_g, a_v0, a_v1, None), rhs, W)
+    layout = _layout(a_s, a_g, a_v0, a_v1, None)
+    prior = None if scale_prior is None else _scale_row(layout.shape[2], *scale_prior)
+    x, cond, resid = _solve(layout, rhs, W, *(prior or (None, None)))
     K = problem.n_keyframes
     return LinearSolution(float(x[0]), x[1:4], x[4:4 + 3 * K].reshape(K, 3), ba, cond,
                           float(np.sqrt(np.mean(resid[:, 3:6] ** 2))))
@@ -194,6 +205,7 @@ def solve_inverse_scale(
     gravity_m_s2: float | None,
     accel_prior: tuple[F64, F64] | None = None,
     iterations: int = 4,
+    scale_prior: tuple[float, float] | None = None,
 ) -> LinearSolution:
     """The same equations multiplied by the inverse scale lam = 1/s, in the unknowns lam,
     gam = lam g and u_k = lam v_k (VO units): the keyframe positions, the noisiest input, then
@@ -206,6 +218,8 @@ def solve_inverse_scale(
     (Qin et al. 2018, eq. 13-14; with lam, gam = lam G g_dir + G B w', w' = lam w).
     ``accel_prior`` = (mean (3,), std (3,)): the accelerometer bias is solved too, as
     beta = lam (b_a - b_a0) through the bias Jacobians, with the prior as extra rows.
+    ``scale_prior`` = (mean, std) of the scale from another sensor: a row on lam = 1/s (std
+    std / mean^2, to first order).
     """
     g_dir = gravity_vo / np.linalg.norm(gravity_vo)
     ba0 = np.asarray(problem.pre[0].accel_bias_m_s2)
@@ -232,6 +246,11 @@ def solve_inverse_scale(
             rows[:, n - 3:] = np.diag(1.0 / (lam0 * accel_prior[1]))
             rows[:, 0] = -(accel_prior[0] - ba0) / (lam0 * accel_prior[1])
             prhs = np.zeros(3)
+        if scale_prior is not None:
+            m, sd = scale_prior
+            srow, srhs = _scale_row(layout.shape[2], 1.0 / m, sd / m**2)
+            rows = srow if rows is None else np.vstack([rows, srow])
+            prhs = srhs if prhs is None else np.concatenate([prhs, srhs])
         x, cond, resid = _solve(layout, -a_s, Wv, rows, prhs)
         lam = float(x[0])
         if lam == 0.0:

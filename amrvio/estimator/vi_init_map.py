@@ -88,13 +88,15 @@ class MapResult:
 @dataclass(frozen=True, slots=True, eq=False)
 class BiasPriors:
     """Means and standard deviations (3,) of the bias priors (the accelerometer's on the first
-    keyframe), and the accelerometer bias walk density (m/s^3/sqrt(Hz), the IMU's datasheet)."""
+    keyframe), and the accelerometer bias walk density (m/s^3/sqrt(Hz), the IMU's datasheet);
+    ``scale``: (mean, std) of a prior on the scale from another sensor (wheel odometry), or None."""
 
     gyro_mean: F64
     gyro_std: F64
     accel_mean: F64
     accel_std: F64
     accel_walk: float
+    scale: tuple[float, float] | None = None
 
 
 BLOCK = 12
@@ -207,16 +209,20 @@ def _system(problem: ViProblem, st: MapState, nm: NoiseModel, W_imu: F64,
         J_walk[3 * k:3 * k + 3, c0:c0 + 3] = -np.eye(3) * w[k]
         J_walk[3 * k:3 * k + 3, c1:c1 + 3] = np.eye(3) * w[k]
     ig, ia = index_gyro_bias(K), index_accel_bias(0)
-    Jp = np.zeros((6, n))
+    n_pri = 6 if pri.scale is None else 7
+    Jp = np.zeros((n_pri, n))
     Jp[0:3, ig:ig + 3] = np.diag(1.0 / pri.gyro_std)
     Jp[3:6, ia:ia + 3] = np.diag(1.0 / pri.accel_std)
     rp = np.concatenate([(st.gyro_bias - pri.gyro_mean) / pri.gyro_std,
                          (st.accel_bias[0] - pri.accel_mean) / pri.accel_std])
+    if pri.scale is not None:
+        Jp[6, 0] = 1.0 / pri.scale[1]
+        rp = np.append(rp, (st.scale - pri.scale[0]) / pri.scale[1])
     r = np.concatenate([a * r_rot.reshape(-1), b * r_pos.reshape(-1), ri[:, 0:3].reshape(-1),
                         ri[:, 3:9].reshape(-1), r_walk, rp])
     J = np.vstack([a * J_rot, b * J_pos.reshape(-1, n), Ji[:, 0:3].reshape(-1, n), Ji[:, 3:9].reshape(-1, n),
                    J_walk, Jp])
-    edges = np.cumsum([0, 3 * K, 3 * K, 3 * M, 6 * M, 3 * M, 6])
+    edges = np.cumsum([0, 3 * K, 3 * K, 3 * M, 6 * M, 3 * M, n_pri])
     return r, J, [slice(int(edges[i]), int(edges[i + 1])) for i in range(6)]
 
 

@@ -368,20 +368,22 @@ class VioStage:
 
     def _wheel_scale(self, stamps: I64, T_vo_cam: F64, imu: ImuData,
                      prior: ViBiasPrior | None) -> tuple[float, ViInitResult]:
-        """The scale from the wheels (distance between keyframes over the VO's), with the
-        initialiser's gravity, velocities and biases solved anyway (``solve_degenerate``)."""
+        """The scale from the wheels (distance between keyframes over the VO's); the initialiser
+        solves gravity, velocities and biases anyway (``solve_degenerate``) with it as the scale's
+        prior (relative std: wheel speed sigma / mean speed; the IMU's own is noise here)."""
         wheel = self.setup.wheel
         if wheel is None:
             return float("nan"), ViInitResult(ViInitStatus.TOO_FEW_KEYFRAMES, "no wheel odometry")
-        cfg = dataclasses.replace(self.init_cfg, solve_degenerate=True)
-        res = initialize_vi(stamps, T_vo_cam, imu, self.setup.T_body_cam, self.backend.cfg.imu, cfg, prior)
         T_cam_body = self.setup.T_body_cam.inverse().matrix()
         p_body = np.einsum("nij,j->ni", T_vo_cam, T_cam_body[:, 3])[:, :3]  # body origin, VO units
         vo = float(np.sum(np.linalg.norm(np.diff(p_body, axis=0), axis=1)))
         metres = wheel.distance_m(int(stamps[0]), int(stamps[-1]))  # the integral is additive
-        # the lever arm makes the body path differ from the camera's only while turning
-        scale = metres / vo if vo > 0 and metres > 0.2 else float("nan")
-        return scale, res
+        if not (vo > 0 and metres > 0.2):  # the lever arm parts body and camera paths in turns only
+            return float("nan"), ViInitResult(ViInitStatus.INSUFFICIENT_EXCITATION, "the wheels hardly moved")
+        scale, speed = metres / vo, metres / ((int(stamps[-1]) - int(stamps[0])) * 1e-9)
+        cfg, rel = dataclasses.replace(self.init_cfg, solve_degenerate=True), max(self.cfg.wheel_sigma_m_s, 1e-3)/speed
+        return scale, initialize_vi(stamps, T_vo_cam, imu, self.setup.T_body_cam, self.backend.cfg.imu, cfg, prior,
+                                    (scale, scale * rel))
 
     def _reinit(self, base: InertialState, obs: VisualObservations, imu: ImuData,
                 landmarks: tuple[I64, F64]) -> VioEstimate:
