@@ -417,6 +417,9 @@ def test_the_frames_before_a_wheel_initialisation_are_not_scaled_twice(tmp_path:
     res = run(str(seq), cfg, out=tmp_path / "out", report=False)
     body = res.output.body
     assert body is not None and 3 <= body.init_frame
+    # the first attempt starts it: the IMU's own scale, noise here, no longer decides (its sign did)
+    attempts = [e for r in res.output.records for e in r.events if e.startswith("vi_init")]
+    assert attempts and attempts[0].startswith("vi_init_wheel:"), attempts
     gt = open_dataset(str(seq)).groundtruth
     assert gt is not None
     t_s = res.output.stamps_ns[: body.init_frame] * 1e-9
