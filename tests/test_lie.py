@@ -97,6 +97,19 @@ def test_sim3_exp_matches_matrix_exponential(xi: np.ndarray) -> None:
     np.testing.assert_allclose(Sim3.exp(xi).matrix(), expm(_sim3_generator(xi)), atol=1e-9)
 
 
+def test_sim3_round_trip_near_the_small_scale_switch() -> None:
+    """Hypothesis found [0, 1, 1, 1, 1, 1, 1e-8]: exp took sigma = 1e-8 through the closed
+    forms, log got 9.99999994e-09 and took the zero-scale ones, 2e-8 apart. Scales and rotations
+    around every switch, against the matrix exponential too."""
+    rng = np.random.default_rng(3)
+    for theta in (0.0, 1e-10, 1e-6, 5e-5, 1e-4, 2e-4, 1e-2, 1.0):
+        for sigma in (0.0, 1e-13, 1e-10, 9.99e-9, 1e-8, 1.001e-8, 2e-8, 1e-6, 1e-4, 2e-4, -1e-8, 0.5):
+            axis = rng.normal(size=3)
+            xi = np.concatenate([rng.uniform(-3, 3, 3), theta * axis / np.linalg.norm(axis), [sigma]])
+            np.testing.assert_allclose(Sim3.exp(xi).log(), xi, atol=1e-11)
+            np.testing.assert_allclose(Sim3.exp(xi).matrix(), expm(_sim3_generator(xi)), atol=1e-11)
+
+
 @settings(max_examples=60, deadline=None)
 @given(rotvec)
 def test_so3_matches_scipy_rotation(w: np.ndarray) -> None:

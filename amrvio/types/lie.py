@@ -409,12 +409,25 @@ class Sim3:
         theta = float(np.linalg.norm(phi))
         W = hat(phi)
         if abs(sigma) < 1e-8:
+            # first order in sigma: at order zero, exp and log fell on different sides of the
+            # switch (log(exp(1e-8)) < 1e-8) and the round trip was off by 2e-8
             _, b, c = _so3_coeffs(np.asarray(theta))
-            a0, b0, c0 = 1.0, float(b), float(c)
+            if theta < 1e-2:
+                db, dc = 1.0 / 3.0, 1.0 / 8.0  # their limits; the O(theta^2) rest times sigma < 1e-12
+            else:
+                st, ct = np.sin(theta), np.cos(theta)
+                db = (st - theta * ct) / theta**3
+                dc = (0.5 - (theta * st + ct - 1.0) / theta**2) / theta**2
+            a0, b0, c0 = 1.0 + 0.5 * sigma, float(b) + sigma * db, float(c) + sigma * dc
         else:
             es = np.exp(sigma)
-            a0 = (es - 1.0) / sigma
-            if theta < 1e-8:
+            a0 = float(np.expm1(sigma)) / sigma  # not (es - 1) / sigma: cancellation near 0
+            # below theta = 1e-4 the closed forms cancel; their values at theta = 0 are off by
+            # O(theta^2), which W and W^2 make O(theta^3) in V
+            if theta < 1e-4 and abs(sigma) < 1e-4:  # and these cancel too: their series
+                b0 = 0.5 + sigma / 3.0 + sigma * sigma / 8.0
+                c0 = 1.0 / 6.0 + sigma / 8.0 + sigma * sigma / 20.0
+            elif theta < 1e-4:
                 b0 = (es * (sigma - 1.0) + 1.0) / sigma**2
                 c0 = (es * (sigma * sigma - 2.0 * sigma + 2.0) - 2.0) / (2.0 * sigma**3)
             else:
