@@ -381,9 +381,9 @@ class VioStage:
         if not (vo > 0 and metres > 0.2):  # the lever arm parts body and camera paths in turns only
             return float("nan"), ViInitResult(ViInitStatus.INSUFFICIENT_EXCITATION, "the wheels hardly moved")
         scale, speed = metres / vo, metres / ((int(stamps[-1]) - int(stamps[0])) * 1e-9)
-        cfg, rel = dataclasses.replace(self.init_cfg, solve_degenerate=True), max(self.cfg.wheel_sigma_m_s, 1e-3)/speed
+        cfg = dataclasses.replace(self.init_cfg, solve_degenerate=True)
         return scale, initialize_vi(stamps, T_vo_cam, imu, self.setup.T_body_cam, self.backend.cfg.imu, cfg, prior,
-                                    (scale, scale * rel))
+                                    (scale, scale * (max(self.cfg.wheel_sigma_m_s, 1e-3) / speed)))
 
     def _reinit(self, base: InertialState, obs: VisualObservations, imu: ImuData,
                 landmarks: tuple[I64, F64]) -> VioEstimate:
