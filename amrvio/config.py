@@ -170,6 +170,8 @@ HELP: dict[str, str] = {
     "tracking.klt.ransac_thresh_px": "essential-matrix outlier threshold (px)",
     "tracking.klt.max_iterations": "KLT iterations per level",
     "tracking.klt.max_width_px": "wider images are tracked on a coarser pyramid level (px; null: full)",
+    "tracking.klt.guided_retrack": "when KLT lost more map-point tracks than PnP kept, track them again "
+                                   "from their projections at the PnP pose",
     "tracking.klt.fb_pyr_levels": "pyramid levels of the backward check; null: as the forward pass",
     "tracking.direct": "sparse direct alignment, SE(3) + affine brightness",
     "tracking.direct.levels": "pyramid levels",

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from amrvio.frontend.direct import DirectConfig, align_direct
-from amrvio.frontend.klt import KltConfig, KltResult, KltTracker, detect_bucketed, predict_tracks
+from amrvio.frontend.klt import KltConfig, KltResult, KltTracker, detect_bucketed, predict_tracks, retrack_projected
 from amrvio.frontend.tracking_types import Landmarks, MotionModel, Observations, TrackingReport, TrackOutcome, TrackStep
 from amrvio.frontend.tracks import UNANCHORED, TrackSet
 from amrvio.geometry.pnp import PnPResult, solve_pnp
@@ -295,17 +295,28 @@ class Tracker:
         those with a map point."""
         if self.prev_img is None:
             raise RuntimeError("Tracker: KLT without a previous image")
-        cfg, tr = self.cfg, self.tracks
-        t0 = time.perf_counter()
+        tr, t0 = self.tracks, time.perf_counter()
         res = self.klt.track(self.prev_img, img, tr.pts, pts_pred=pred, wide=wide, K=self.K)
         self._toc("klt", t0)
-        use = res.ok & has
-        t0 = time.perf_counter()
-        pnp = solve_pnp(m.xyz[tr.ids[use]], res.pts[use], self.K, T_guess=T_guess,
+        use, lost = res.ok & has, has & ~res.ok
+        pnp = self._pnp(m, res, use, T_guess)
+        if pnp.ok and self.cfg.klt.guided_retrack and int(lost.sum()) > int(pnp.inliers.sum()):
+            t0 = time.perf_counter()
+            res2 = retrack_projected(self.klt, self.prev_img, img, res, lost, m.xyz[tr.ids[lost]], self.K,
+                                     pnp.T_cam_world, tr.pts)
+            self._toc("klt", t0)
+            pnp2 = self._pnp(m, res2, res2.ok & has, pnp.T_cam_world)
+            if pnp2.ok and int(pnp2.inliers.sum()) > int(pnp.inliers.sum()):
+                return res2, res2.ok & has, pnp2
+        return res, use, pnp
+
+    def _pnp(self, m: Landmarks, res: KltResult, use: NDArray[np.bool_], T_guess: F64) -> PnPResult:
+        cfg, t0 = self.cfg, time.perf_counter()
+        pnp = solve_pnp(m.xyz[self.tracks.ids[use]], res.pts[use], self.K, T_guess=T_guess,
                         ransac_thresh_px=cfg.pnp_thresh_px, min_inliers=cfg.min_pnp_inliers,
                         huber_px=cfg.huber_px, seed=self.seed)
         self._toc("pnp", t0)
-        return res, use, pnp
+        return pnp
 
     def is_repeat(self, img: U8) -> bool:
         """True when ``img`` repeats the last tracked image exactly (a recorder that duplicates
@@ -353,10 +364,8 @@ class Tracker:
         has = m.points_of(tr.ids)
         if int(has.sum()) < self.cfg.direct.min_pixels:
             return None
-        t0 = time.perf_counter()
-        X = m.xyz[tr.ids[has]]
-        T_last = self.motion.T_last
-        depth = X @ T_last[2, :3] + T_last[2, 3]
+        t0, T_last = time.perf_counter(), self.motion.T_last
+        depth = m.xyz[tr.ids[has]] @ T_last[2, :3] + T_last[2, 3]
         res = align_direct(self.prev_img, img, tr.pts[has], depth, self.K, T_init=V,
                            config=self.cfg.direct)
         self._toc("direct", t0)
