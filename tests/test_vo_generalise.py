@@ -111,7 +111,7 @@ def test_after_blurred_frames_that_pnp_posed_the_map_is_not_searched(tmp_path: P
                     height=480, ev_steps=f"{0.2 * t:.2f}:+1,{0.45 * t:.2f}:-1.5,{0.7 * t:.2f}:+1",
                     blur_bursts=f"{0.3 * t:.2f}:0.5:3,{0.6 * t:.2f}:0.5:3", blur=True)
     posed = [r.index for r in out.records if r.tracking is not None
-             and r.tracking.outcome is TrackOutcome.TRACKED_BLURRED]
+             and r.tracking.outcome in (TrackOutcome.TRACKED_BLURRED, TrackOutcome.BLURRED_REFERENCE)]
     assert len(posed) >= 5, "no burst that PnP poses: the case no longer tests what it guards"
     assert not any(e.startswith("reloc") for r in out.records for e in r.events)
     assert ate <= 0.2
