@@ -258,6 +258,7 @@ HELP: dict[str, str] = {
     "recovery.reloc.max_hamming": "largest Hamming distance of an appearance match (of 256 bits)",
     "recovery.reloc.min_matches": "matches a keyframe needs to be tried",
     "recovery.reloc.max_candidates": "keyframes tried, best bag-of-words score first",
+    "recovery.reloc.recent_candidates": "the newest keyframes, tried as well",
     "recovery.reloc.pnp_thresh_px": "PnP inlier gate (px)",
     "recovery.reloc.min_inliers": "inliers the final pose needs",
     "recovery.reloc.search_radius_px": "radius of the search by projection (px)",

@@ -237,7 +237,7 @@ def test_bow_scores_are_the_l1_tfidf_similarity_whatever_the_chunk() -> None:
 
 @pytest.mark.parametrize("kw", [{"ratio": 0.0}, {"max_hamming": 300}, {"min_matches": 3},
                                 {"min_inliers": 5}, {"pnp_thresh_px": 0.0},
-                                {"n_corners": 0, "n_features": 0}, {"max_candidates": 0}])
+                                {"n_corners": 0, "n_features": 0}, {"max_candidates": 0}, {"recent_candidates": -1}])
 def test_reloc_config_rejects_bad_values(kw: dict[str, float]) -> None:
     with pytest.raises(ConfigError):
         RelocConfig(**kw)  # type: ignore[arg-type]
