@@ -189,8 +189,8 @@ def solve_free_gravity(problem: ViProblem, gyro_bias: F64, W: F64,
     ba = np.asarray(problem.pre[0].accel_bias_m_s2)
     a_s, a_g, a_v0, a_v1, rhs = _rows(problem, gyro_bias, ba)
     layout = _layout(a_s, a_g, a_v0, a_v1, None)
-    prior = None if scale_prior is None else _scale_row(layout.shape[2], *scale_prior)
-    x, cond, resid = _solve(layout, rhs, W, *(prior or (None, None)))
+    rows, prhs = (None, None) if scale_prior is None else _scale_row(layout.shape[2], *scale_prior)
+    x, cond, resid = _solve(layout, rhs, W, rows, prhs)
     K = problem.n_keyframes
     return LinearSolution(float(x[0]), x[1:4], x[4:4 + 3 * K].reshape(K, 3), ba, cond,
                           float(np.sqrt(np.mean(resid[:, 3:6] ** 2))))
