@@ -13,8 +13,10 @@ One stage with a narrow interface, fed by the pipeline:
   visual factors (VINS-Mono's policy: standing still or turning on the spot does not push the
   keyframes, and their landmarks, out of the window). Old keyframes are marginalised with the
   landmarks they saw first, so the marginal prior links frame states only
-  (:mod:`amrvio.estimator.vio_landmarks`). The result carries the consistency checks of
-  :mod:`amrvio.estimator.vio_checks`;
+  (:mod:`amrvio.estimator.vio_landmarks`). iSAM2 then holds the marginal's variables at their
+  linearisation points; once one has moved beyond iSAM2's relinearisation threshold, the window
+  goes into a new smoother at the current estimate (:mod:`amrvio.estimator.vio_relinearise`).
+  The result carries the consistency checks of :mod:`amrvio.estimator.vio_checks`;
 - ``propagate(t_ns, imu, bridged) -> VioEstimate``: the IMU prediction from the newest frame for
   a frame not given to ``add_frame``, or one that was dropped (blur) or lost (``bridged=True``),
   with its growing uncertainty.
@@ -36,19 +38,22 @@ from amrvio.errors import ShapeError
 from amrvio.estimator.vio_checks import KeyframeCheckInput, check_keyframe
 from amrvio.estimator.vio_graph import (
     EXPIRED,
+    RELINEARIZE_THRESHOLD,
     WindowFrame,
     add_priors,
+    age_noise,
     live_slots,
     make_camera,
     make_smoother,
     marginal_covariance,
-    pixel_noise,
     prior_sigmas_15,
+    smoother_params,
     smoother_update,
     state_keys,
     sym,
 )
-from amrvio.estimator.vio_landmarks import LandmarkTracks, project_px
+from amrvio.estimator.vio_landmarks import LandmarkTracks, project_px, range_ratio_within
+from amrvio.estimator.vio_relinearise import fixed_due, rebuild
 from amrvio.estimator.vio_triangulate import keyframe_due, triangulate_pending
 from amrvio.estimator.vio_types import (
     EstimateKind,
@@ -95,7 +100,6 @@ class VioBackend:
         self._smoother: gtsam.IncrementalFixedLagSmoother | None = None
         self._values: gtsam.Values | None = None
         self._tracks = LandmarkTracks()
-        self._noise_by_age: dict[int, gtsam.noiseModel.Base] = {}
         self._window: list[WindowFrame] = []
         self._last: tuple[InertialState, F64] | None = None  # newest frame's state and 15x15 covariance
         self._history: deque[KeyframeCheckInput] = deque(maxlen=HISTORY)
@@ -211,7 +215,7 @@ class VioBackend:
             removed = live_slots(self._smoother, prev.slots, prev.factors)
         born = {lm.key: lm.first_keyframe for lm in self._tracks.active.values()}
         first, used = graph.size(), list(seen)
-        factors = [self._cam.factor(uv, k, key, self._age_noise(k - born.get(key, k))) for key, uv in used]
+        factors = [self._cam.factor(uv, k, key, age_noise(self.cfg.visual, k - born.get(key, k))) for key, uv in used]
         for f in factors:
             graph.add(f)
         n_new = 0
@@ -229,6 +233,9 @@ class VioBackend:
             slots = smoother_update(self._smoother, graph, values, stamps, removed, k)
             for _ in range(self.cfg.iterations - 1):
                 self._smoother.update()
+            if fixed_due(self._smoother, RELINEARIZE_THRESHOLD):  # vio_relinearise: iSAM2 fixed it
+                self._smoother, moved = rebuild(self._smoother, smoother_params(), k)
+                slots = [moved.get(s, -1) for s in slots]  # the prior of z (smoother_update) is gone
             self._values = self._smoother.calculateEstimate()
             cov = marginal_covariance(self._smoother, self._values, k)
         except RuntimeError:  # gtsam: indeterminant linear system
@@ -349,23 +356,12 @@ class VioBackend:
         if vis.max_log_scale > 0:
             # the track outlived its landmark: the front-end id starts a new one (pending, then
             # triangulated again from the views that follow); the old one keeps its views
-            first = np.array([lm.first_keyframe for _, lm in rows])
-            beyond = ok & ~self._range_ratio_within(Xw, first, T_wc_pred.t, vis.max_log_scale)
+            centres = {f: self._kf_camera(f).t for f in {lm.first_keyframe for _, lm in rows}}
+            first = np.array([centres[lm.first_keyframe] for _, lm in rows])
+            beyond = ok & ~range_ratio_within(Xw, first, T_wc_pred.t, vis.max_log_scale)
             self._tracks.retire([int(obs.ids[rows[j][0]]) for j in np.flatnonzero(beyond).tolist()])
             ok &= ~beyond
         return [(rows[j][1].key, uv_obs[j]) for j in np.flatnonzero(ok).tolist()], int(np.count_nonzero(~ok))
-
-    def _range_ratio_within(self, Xw: F64, first: NDArray[np.int64], c_now: F64, limit: float) -> NDArray[np.bool_]:
-        """Whether each landmark's distance from the camera centre ``c_now`` is within ``limit``
-        (natural log of the ratio) of its distance from its first keyframe's (frame index
-        ``first``): the scale change of its image patch, which a rotation does not change."""
-        r0 = np.zeros(len(first))
-        for f in np.unique(first).tolist():
-            sel = first == f
-            r0[sel] = np.linalg.norm(Xw[sel] - self._kf_camera(int(f)).t, axis=1)
-        r1 = np.linalg.norm(Xw - c_now, axis=1)
-        ok = (r0 > 0) & (r1 > 0)
-        return ok & (np.abs(np.log(np.where(ok, r0, 1.0) / np.where(ok, r1, 1.0))) <= limit)
 
     def _is_keyframe(self, seen: list[tuple[int, F64]], T_wc_pred: SE3, last_kf: WindowFrame) -> bool:
         Xw = np.array([self._landmark(key) for key, _ in seen]).reshape(-1, 3)
@@ -373,17 +369,6 @@ class VioBackend:
             self._tracks.typical_depth_m = float(np.median(np.linalg.norm(Xw - T_wc_pred.t, axis=1)))
         return keyframe_due(Xw, self._kf_camera(last_kf.index).t, T_wc_pred.t, self._tracks.typical_depth_m,
                             self.cfg.visual)
-
-    def _age_noise(self, age: int) -> gtsam.noiseModel.Base | None:
-        """The pixel noise of an observation of a landmark first seen ``age`` frames ago (None:
-        the camera's own; see ``VisualConfig.track_age_sigma_frames``)."""
-        vis = self.cfg.visual
-        if vis.track_age_sigma_frames <= 0 or age <= 0:
-            return None
-        if age not in self._noise_by_age:
-            sigma = vis.pixel_sigma_px * float(np.sqrt(1.0 + age / vis.track_age_sigma_frames))
-            self._noise_by_age[age] = pixel_noise(vis, sigma)
-        return self._noise_by_age[age]
 
     def _rms_px(self, state: InertialState, used: list[tuple[int, F64]]) -> float | None:
         """RMS pixel distance of this frame's used observations to their optimised projection."""

@@ -9,6 +9,7 @@ their spacing in time.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, SupportsFloat, SupportsIndex, SupportsInt
@@ -28,6 +29,9 @@ F64 = NDArray[np.float64]
 
 #: smoother time given to a frame that must be marginalised in the coming update
 EXPIRED = -1e9
+
+#: iSAM2's relinearisation threshold (rad, m, m/s and bias units alike: each tangent component)
+RELINEARIZE_THRESHOLD = 0.01
 
 
 def sym(c: str, i: int) -> int:
@@ -73,6 +77,15 @@ def pixel_noise(cfg: VisualConfig, sigma_px: float) -> gtsam.noiseModel.Base:
                                           gtsam.noiseModel.Isotropic.Sigma(2, float(sigma_px)))
 
 
+@functools.lru_cache(maxsize=512)
+def age_noise(cfg: VisualConfig, age: int) -> gtsam.noiseModel.Base | None:
+    """The pixel noise of an observation of a landmark first seen ``age`` frames ago (None: the
+    camera's own; see ``VisualConfig.track_age_sigma_frames``)."""
+    if cfg.track_age_sigma_frames <= 0 or age <= 0:
+        return None
+    return pixel_noise(cfg, cfg.pixel_sigma_px * float(np.sqrt(1.0 + age / cfg.track_age_sigma_frames)))
+
+
 def make_camera(K: ArrayLike, T_body_cam: SE3, cfg: VisualConfig) -> Camera:
     import gtsam
 
@@ -97,11 +110,19 @@ def make_smoother(window_keyframes: int) -> gtsam.IncrementalFixedLagSmoother:
     (:func:`live_slots`)."""
     import gtsam
 
+    return gtsam.IncrementalFixedLagSmoother(float(window_keyframes - 1), smoother_params())
+
+
+def smoother_params() -> gtsam.ISAM2Params:
+    """iSAM2's parameters: relinearise a variable whose delta has a component beyond
+    :data:`RELINEARIZE_THRESHOLD`, checked at every update; reuse the slots of removed factors."""
+    import gtsam
+
     params = gtsam.ISAM2Params()
-    params.setRelinearizeThreshold(0.01)
+    params.setRelinearizeThreshold(RELINEARIZE_THRESHOLD)
     params.relinearizeSkip = 1
     params.findUnusedFactorSlots = True
-    return gtsam.IncrementalFixedLagSmoother(float(window_keyframes - 1), params)
+    return params
 
 
 def prior_sigmas_15(sig: PriorSigmas) -> F64:
@@ -185,5 +206,6 @@ class WindowFrame:
     factors: Sequence[object] = ()
 
 
-__all__ = ["EXPIRED", "Camera", "WindowFrame", "add_priors", "live_slots", "make_camera", "make_smoother",
-           "marginal_covariance", "prior_sigmas_15", "smoother_update", "state_keys", "sym"]
+__all__ = ["EXPIRED", "RELINEARIZE_THRESHOLD", "Camera", "WindowFrame", "add_priors", "age_noise", "live_slots",
+           "make_camera", "make_smoother", "marginal_covariance", "prior_sigmas_15", "smoother_params",
+           "smoother_update", "state_keys", "sym"]

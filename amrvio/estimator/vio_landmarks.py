@@ -35,6 +35,16 @@ def project_px(K: F64, T_world_cam: SE3, X_world: F64) -> tuple[F64, F64]:
     return uv, z
 
 
+def range_ratio_within(X_world: F64, centres_first: F64, centre_now: F64, limit: float) -> NDArray[np.bool_]:
+    """Whether each landmark's (N, 3) distance from the camera centre ``centre_now`` is within
+    ``limit`` (natural log of the ratio) of its distance from its first keyframe's centre (N, 3):
+    the scale change of its image patch, which a rotation does not change."""
+    r0 = np.linalg.norm(X_world - centres_first, axis=1)
+    r1 = np.linalg.norm(X_world - centre_now, axis=1)
+    ok = (r0 > 0) & (r1 > 0)
+    return ok & (np.abs(np.log(np.where(ok, r0, 1.0) / np.where(ok, r1, 1.0))) <= limit)
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class TrackTriangulation:
     """Per track (T tracks): the point closest to its rays in the least-squares sense (T, 3), the
@@ -125,4 +135,4 @@ class LandmarkTracks:
                 del self.pending[lm_id]
 
 
-__all__ = ["Landmark", "LandmarkTracks", "TrackTriangulation", "project_px", "triangulate_tracks"]
+__all__ = ["Landmark", "LandmarkTracks", "TrackTriangulation", "project_px", "range_ratio_within", "triangulate_tracks"]

@@ -179,19 +179,16 @@ def test_landmark_prior_range_must_be_a_non_negative_number() -> None:
 def test_observation_sigma_grows_with_the_age_of_its_landmark() -> None:
     """sigma(age) = pixel_sigma * sqrt(1 + age / track_age_sigma_frames): whitening a residual of
     that many pixels gives one standard deviation; age 0 and a factor of 0 keep the camera's own."""
-    from amrvio.estimator.vio_backend import VioBackend
-    from amrvio.estimator.vio_types import VioConfig
+    from amrvio.estimator.vio_graph import age_noise
 
     vis = VisualConfig(pixel_sigma_px=1.0, track_age_sigma_frames=10.0)
-    be = VioBackend(VioConfig(visual=vis), K, SE3.identity())
     for age in (5, 10, 30):
         sigma = float(np.sqrt(1.0 + age / 10.0))
-        noise = be._age_noise(age)
+        noise = age_noise(vis, age)
         assert noise is not None
         np.testing.assert_allclose(noise.whiten(np.array([sigma, 0.0])), [1.0, 0.0], rtol=1e-12)
-    assert be._age_noise(0) is None
-    off = VioBackend(VioConfig(visual=VisualConfig(track_age_sigma_frames=0.0)), K, SE3.identity())
-    assert off._age_noise(30) is None
+    assert age_noise(vis, 0) is None
+    assert age_noise(VisualConfig(track_age_sigma_frames=0.0), 30) is None
 
 
 def test_track_age_sigma_frames_must_be_a_non_negative_number() -> None:
