@@ -14,8 +14,8 @@ One stage with a narrow interface, fed by the pipeline:
   keyframes, and their landmarks, out of the window). Old keyframes are marginalised with the
   landmarks they saw first, so the marginal prior links frame states only
   (:mod:`amrvio.estimator.vio_landmarks`). iSAM2 then holds the marginal's variables at their
-  linearisation points; once one has moved beyond iSAM2's relinearisation threshold, the window
-  goes into a new smoother at the current estimate (:mod:`amrvio.estimator.vio_relinearise`).
+  linearisation points; once one has moved far from its point, the window goes into a new
+  smoother at the current estimate (:mod:`amrvio.estimator.vio_relinearise`).
   The result carries the consistency checks of :mod:`amrvio.estimator.vio_checks`;
 - ``propagate(t_ns, imu, bridged) -> VioEstimate``: the IMU prediction from the newest frame for
   a frame not given to ``add_frame``, or one that was dropped (blur) or lost (``bridged=True``),
@@ -38,7 +38,6 @@ from amrvio.errors import ShapeError
 from amrvio.estimator.vio_checks import KeyframeCheckInput, check_keyframe
 from amrvio.estimator.vio_graph import (
     EXPIRED,
-    RELINEARIZE_THRESHOLD,
     WindowFrame,
     add_priors,
     age_noise,
@@ -53,7 +52,7 @@ from amrvio.estimator.vio_graph import (
     sym,
 )
 from amrvio.estimator.vio_landmarks import LandmarkTracks, project_px, range_ratio_within
-from amrvio.estimator.vio_relinearise import fixed_due, rebuild
+from amrvio.estimator.vio_relinearise import REBUILD_THRESHOLD, fixed_due, rebuild
 from amrvio.estimator.vio_triangulate import keyframe_due, triangulate_pending
 from amrvio.estimator.vio_types import (
     EstimateKind,
@@ -233,7 +232,7 @@ class VioBackend:
             slots = smoother_update(self._smoother, graph, values, stamps, removed, k)
             for _ in range(self.cfg.iterations - 1):
                 self._smoother.update()
-            if fixed_due(self._smoother, RELINEARIZE_THRESHOLD):  # vio_relinearise: iSAM2 fixed it
+            if fixed_due(self._smoother, REBUILD_THRESHOLD):  # vio_relinearise: iSAM2 fixed it far off
                 self._smoother, moved = rebuild(self._smoother, smoother_params(), k)
                 slots = [moved.get(s, -1) for s in slots]  # the prior of z (smoother_update) is gone
             self._values = self._smoother.calculateEstimate()
