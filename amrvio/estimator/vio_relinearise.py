@@ -57,22 +57,6 @@ def fixed_due(smoother: gtsam.IncrementalFixedLagSmoother, threshold: float) -> 
     return any(delta.exists(k) and float(np.max(np.abs(delta.at(k)))) > threshold for k in fixed)
 
 
-def _copy(dst: gtsam.Values, src: gtsam.Values, key: int) -> None:
-    """Insert ``src``'s value of ``key`` into ``dst`` (keys as in :mod:`amrvio.estimator.vio_graph`:
-    ``x`` Pose3, ``v`` velocity, ``b`` bias, others Point3)."""
-    import gtsam
-
-    kind = chr(gtsam.Symbol(key).chr())
-    if kind == "x":
-        dst.insert(key, src.atPose3(key))
-    elif kind == "b":
-        dst.insert(key, src.atConstantBias(key))
-    elif kind == "v":
-        dst.insert(key, src.atVector(key))
-    else:
-        dst.insert(key, src.atPoint3(key))
-
-
 def rebuild(smoother: gtsam.IncrementalFixedLagSmoother, params: gtsam.ISAM2Params,
             tick: int) -> tuple[gtsam.IncrementalFixedLagSmoother, dict[int, int]]:
     """A new smoother (lag and ``params`` as given) holding ``smoother``'s factors, variables and
@@ -92,11 +76,9 @@ def rebuild(smoother: gtsam.IncrementalFixedLagSmoother, params: gtsam.ISAM2Para
         f = old.at(slot)
         if isinstance(f, gtsam.LinearContainerFactor):
             # expressed at iSAM2's linearisation point: the point a marginal without one was made
-            # at (its keys were fixed since), or the shift of one that carries its own
-            point = gtsam.Values()
-            for key in f.keys():
-                _copy(point, lin, key)
-            f = gtsam.LinearContainerFactor(f.linearize(lin), point)
+            # at (its keys were fixed since), or the shift of one that carries its own; the new
+            # factor keeps the values of its own keys only
+            f = gtsam.LinearContainerFactor(f.linearize(lin), lin)
         order.append(slot)
         graph.add(f)
     stamps = {int(k): float(t) for k, t in smoother.timestamps().items()}
