@@ -199,14 +199,17 @@ def _with_imu(sc: Scenario, t_from_s: float, gyro: tuple[float, float, float] = 
 def test_an_injected_bias_jump_is_flagged(kind: str, gyro: tuple[float, float, float],
                                           accel: tuple[float, float, float]) -> None:
     """A step of 0.3 m/s^2 (100 sigma of the accel bias walk over 1 s) or 0.02 rad/s at 6 s:
-    flagged within 1.5 s (measured: 1.1 s, 0.4 s), never before the step."""
+    flagged within 1.5 s, by the bias-drift or scale check too, never before the step (measured:
+    the accel step 1.3 s by the scale check, 1.4 s by the bias drift; the gyro step 1.0 s by the
+    reprojection, 1.3 s by the bias drift)."""
     sc = _with_imu(_scenario(kind, 9.0), 6.0, gyro, accel)
     log = run_frames(sc, start(sc), 0.0, 8.5)
     flagged = [t for t, _ in log.failed_checks()]
     assert flagged, "the bias jump went unnoticed"
     assert min(flagged) > 6.0 and min(flagged) < 7.5
-    first = log.results[log.t_s.index(min(flagged))].checks
-    assert first is not None and {CheckName.BIAS_DRIFT, CheckName.SCALE} & set(first.failed)
+    drift = [t for t, r in zip(log.t_s, log.results, strict=True)
+             if r.checks is not None and {CheckName.BIAS_DRIFT, CheckName.SCALE} & set(r.checks.failed)]
+    assert drift and min(drift) < 7.5
 
 
 @pytest.mark.parametrize("scale", [1.15, 0.85])

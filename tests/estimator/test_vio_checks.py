@@ -134,16 +134,29 @@ def test_bias_beyond_the_specification_fails() -> None:
 
 
 def test_bias_moving_faster_than_its_random_walk_fails() -> None:
-    """Over 1 s the ADIS16448 gyro bias walks 1.9e-5 rad/s (1 sigma) and its estimate is known to
-    1e-4: 6 sigma allow 6.1e-4 rad/s. A drift of 2e-4 rad/s per second passes, 2e-3 fails."""
+    """Over 1 s the ADIS16448 gyro bias walks 1.9e-5 rad/s (1 sigma) and both estimates compared
+    are known to 1e-4: 6 sigma allow 8.6e-4 rad/s. A drift of 2e-4 rad/s per second passes, 2e-3
+    fails."""
     slow = _history(bias_rate=(np.array([0.0, 0.0, 2e-4]), np.zeros(3)))
     fast = _history(bias_rate=(np.array([0.0, 0.0, 2e-3]), np.zeros(3)))
     assert check_bias_drift(slow, NOISE, CFG).status is CheckStatus.PASS
     res = check_bias_drift(fast, NOISE, CFG)
-    assert res.status is CheckStatus.FAIL and res.value == pytest.approx(2e-3 / (6 * np.hypot(1.9393e-5, 1e-4)), rel=1e-3)
+    assert res.status is CheckStatus.FAIL and res.value == pytest.approx(2e-3 / (6 * np.sqrt(1.9393e-5**2 + 2 * 1e-4**2)), rel=1e-3)
     accel = _history(bias_rate=(np.zeros(3), np.array([0.1, 0.0, 0.0])))
     assert check_bias_drift(accel, NOISE, CFG).status is CheckStatus.FAIL
     assert check_bias_drift(fast[:1], NOISE, CFG).status is CheckStatus.SKIPPED
+
+
+@pytest.mark.parametrize(("rate", "status"), [(2e-3, CheckStatus.PASS), (4e-3, CheckStatus.FAIL)])
+def test_a_bias_change_within_the_newest_estimates_uncertainty_is_no_drift(rate: float, status: CheckStatus) -> None:
+    """The first estimate known to 1e-4 rad/s, the newest only to 5e-4 (a window that says little
+    of the bias): 6 sigma of the difference allow 3.06e-3 rad/s in 1 s (6.1e-4 with the first's
+    sigma alone), so 2e-3 passes and 4e-3 fails."""
+    h = _history(bias_rate=(np.array([0.0, 0.0, rate]), np.zeros(3)))
+    h[-1] = dataclasses.replace(h[-1], gyro_bias_sigma_rad_s=np.full(3, 5e-4))
+    res = check_bias_drift(h, NOISE, CFG)
+    assert res.status is status
+    assert res.value == pytest.approx(rate / (6 * np.sqrt(1.9393e-5**2 + 1e-4**2 + 5e-4**2)), rel=1e-3)
 
 
 def test_reprojection_rms_over_the_limit_fails_and_none_is_skipped() -> None:
