@@ -115,7 +115,9 @@ class VioConfig:
     ADIS16448 of EuRoC). imu_noise_scale: factor on all four (a calibration on the bench does not
     see the vibration of a flying or driving platform: on the EuRoC V1_01 flight, 0.5 s IMU-only
     predictions from the ground truth miss it by 8.5 to 9.5 times the sigmas of its sensor.yaml's
-    values (RMS), and by 0.9 with a factor of 10). gravity_m_s2: local gravity. window_keyframes:
+    values (RMS), and by 0.9 with a factor of 10; 1 here, the noise as given: the pipeline's
+    ``vio.imu_noise_scale`` defaults to 3, see :class:`amrvio.pipeline.vio_report.VioStageConfig`).
+    gravity_m_s2: local gravity. window_keyframes:
     frames in the fixed-lag smoother (the keyframes and the newest frame); older keyframes, and
     the landmarks first seen by them, are marginalised. max_imu_gap_s: longest stretch without an IMU sample that
     integration may bridge. iterations: smoother updates per frame. visual: the visual factors.
