@@ -55,14 +55,7 @@ class DynamicInitConfig:
 @dataclass(frozen=True, slots=True)
 class VioStageConfig:
     """``enabled``: run VIO when the recording has an IMU; ``imu_noise_scale``: factor on the
-    IMU's noise densities and random walks (a vibrating platform is noisier than its datasheet:
-    the V1_01 flight's recorded IMU misses its 0.5 s predictions from the ground truth by 8.5-9.5
-    times its sensor.yaml's sigmas, see :class:`amrvio.estimator.vio_types.VioConfig`). 3, between
-    the datasheet (right for the simulator's and MH_01's synthetic IMUs) and the flight's 9: on
-    the replay of V1_01 with its recorded IMU (4 render seeds each at 376x240 and 752x480) the
-    scale error was 0.08-0.71 % and 0.42-1.37 % with 1 (median 0.15 % and 1.10 %), 0.09-0.37 %
-    and 0.60-0.84 % with 3 (median 0.17 % and 0.76 %), 0.35-0.66 % and 0.47-1.07 % with 10 (seeds
-    1 and 3 at 752x480); the SE3 ATE 0.023-0.028 m, 0.011-0.017 m and 0.010-0.013 m at 376x240;
+    IMU's noise densities and random walks, 3 (why: :class:`amrvio.estimator.vio_types.VioConfig`);
     ``window_keyframes``: keyframes in the fixed-lag smoother; ``static_init_s``: still this long
     from the start starts the smoother at rest (0: never); ``dynamic_init``: the dynamic
     initialisation's needs and gates (:class:`DynamicInitConfig`); ``min_tracks``: fewer tracks
