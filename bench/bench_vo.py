@@ -157,16 +157,38 @@ def _kitti_sensitivity(quick: bool) -> list[Row]:
     return rows
 
 
-def _sim_sequence(tmp: Path, motion: str, seconds: float) -> Path:
+def _sim_sequence(tmp: Path, motion: str, seconds: float, seed: int = 0) -> Path:
     from amrvio.sim.simulate import SimConfig, simulate
 
-    out = tmp / motion
+    out = tmp / f"{motion}_{seed}"
     t = seconds
     cfg = SimConfig(scene="corridor", motion=motion, seconds=t, fps=20.0, width=752, height=480,
                     ev_steps=f"{0.2 * t:.2f}:+1,{0.45 * t:.2f}:-1.5,{0.7 * t:.2f}:+1",
-                    blur_bursts=f"{0.3 * t:.2f}:0.5:3,{0.6 * t:.2f}:0.5:3")
+                    blur_bursts=f"{0.3 * t:.2f}:0.5:3,{0.6 * t:.2f}:0.5:3", seed=seed)
     simulate(cfg, out)
     return out
+
+
+#: render seeds of the corridor's protocol (texture, sensor and IMU noise; the drive is the same):
+#: one draw is not a result (seed 0 went from 0.18 to 0.44 % with vio.imu_noise_scale 3, while
+#: seeds 0-3 went from a median of 0.50 % to 0.30 %)
+CORRIDOR_SEEDS: tuple[int, ...] = (0, 1, 2, 3)
+
+
+def _corridor_protocol(first: float, seconds: float) -> list[Row]:
+    """The full pipeline on the forward-stop-turn corridor over :data:`CORRIDOR_SEEDS`;
+    ``first``: seed 0's Sim3 ATE / path (%), already run."""
+    pcts = [first]
+    with tempfile.TemporaryDirectory() as td:
+        for seed in CORRIDOR_SEEDS[1:]:
+            ds = open_dataset(str(_sim_sequence(Path(td), "forward-stop-turn", seconds, seed)))
+            if ds.groundtruth is None or ds.T_body_cam is None:
+                raise RuntimeError("the simulator wrote no ground truth")
+            ate, length, _ = _eval(run_pipeline(ds, PipelineConfig()), ds.groundtruth.right_multiplied(ds.T_body_cam))
+            pcts.append(100 * ate / length)
+    return [_row(f"sim corridor forward-stop-turn 752x480 [full], protocol over {len(CORRIDOR_SEEDS)} render "
+                 "seeds: median Sim3 ATE / path", statistics.median(pcts), "%",
+                 f"render seeds {list(CORRIDOR_SEEDS)}: {[round(v, 3) for v in pcts]} %; goal <= 0.5")]
 
 
 def _sim(repeats: int, seconds: float) -> list[Row]:
@@ -208,6 +230,7 @@ def _sim(repeats: int, seconds: float) -> list[Row]:
                                      f"median of {repeats}; images preloaded"))
                     if motion == "forward-stop-turn":
                         rows += _stage_rows("sim 752x480", out)
+                        rows += _corridor_protocol(100 * ate / length, seconds)
     return rows
 
 
