@@ -22,10 +22,11 @@ from numpy.typing import NDArray
 
 from amrvio.config import PipelineConfig, without_photometric
 from amrvio.eval.evaluate import evaluate
-from amrvio.io.dataset import open_dataset
+from amrvio.io.dataset import Dataset, open_dataset
 from amrvio.pipeline.pipeline import PipelineOutput
 from amrvio.pipeline.records import PoseStatus
 from amrvio.pipeline.run import run_pipeline
+from amrvio.pipeline.run_eval import camera_groundtruth
 from amrvio.pipeline.threads import run_settings
 from amrvio.types.trajectory import Trajectory
 
@@ -169,6 +170,14 @@ def _sim_sequence(tmp: Path, motion: str, seconds: float, seed: int = 0) -> Path
     return out
 
 
+def _camera_gt(ds: Dataset) -> Trajectory:
+    """The simulated sequence's ground-truth camera poses (an error when it has none)."""
+    gt, why = camera_groundtruth(ds)
+    if gt is None:
+        raise RuntimeError(f"the simulator wrote no usable ground truth: {why}")
+    return gt
+
+
 #: render seeds of the corridor's protocol (texture, sensor and IMU noise; the drive is the same):
 #: one draw is not a result (seed 0 went from 0.18 to 0.44 % with vio.imu_noise_scale 3, while
 #: seeds 0-3 went from a median of 0.50 % to 0.30 %)
@@ -182,9 +191,7 @@ def _corridor_protocol(first: float, seconds: float) -> list[Row]:
     with tempfile.TemporaryDirectory() as td:
         for seed in CORRIDOR_SEEDS[1:]:
             ds = open_dataset(str(_sim_sequence(Path(td), "forward-stop-turn", seconds, seed)))
-            if ds.groundtruth is None or ds.T_body_cam is None:
-                raise RuntimeError("the simulator wrote no ground truth")
-            ate, length, _ = _eval(run_pipeline(ds, PipelineConfig()), ds.groundtruth.right_multiplied(ds.T_body_cam))
+            ate, length, _ = _eval(run_pipeline(ds, PipelineConfig()), _camera_gt(ds))
             pcts.append(100 * ate / length)
     return [_row(f"sim corridor forward-stop-turn 752x480 [full], protocol over {len(CORRIDOR_SEEDS)} render "
                  "seeds: median Sim3 ATE / path", statistics.median(pcts), "%",
@@ -203,10 +210,7 @@ def _sim(repeats: int, seconds: float) -> list[Row]:
         for motion in ("forward-stop-turn", "constant-velocity"):
             seq = _sim_sequence(Path(td), motion, seconds)
             ds = open_dataset(str(seq))
-            gt = ds.groundtruth
-            if gt is None or ds.T_body_cam is None:
-                raise RuntimeError("the simulator wrote no ground truth")
-            gt_cam = gt.right_multiplied(ds.T_body_cam)
+            gt_cam = _camera_gt(ds)
             tag = f"sim corridor {motion} 752x480"
             for name, cfg in variants.items():
                 if motion != "forward-stop-turn" and name != "full":
