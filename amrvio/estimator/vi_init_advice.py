@@ -16,6 +16,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from amrvio.errors import ShapeError
 from amrvio.estimator.vi_init_types import (
     ViExcitation,
     ViInitConfig,
@@ -82,32 +83,61 @@ def measure_excitation(
         accel_std_cam_m_s2=np.asarray(per_axis, dtype=np.float64),
         rotation_range_deg=rotation_range[0],
         rotation_range_cam_deg=np.asarray(rotation_range[1], dtype=np.float64),
-        translation_snr=translation_snr(c_vo),
+        translation_snr=translation_snr(c_vo, (stamps_ns - stamps_ns[0]).astype(np.float64) * 1e-9),
     )
 
 
-def translation_snr(c_vo: F64) -> float:
+def translation_snr(c_vo: F64, t_s: F64 | None = None) -> float:
     """Largest distance of the VO camera from its mean position over its jitter. The jitter is
-    the smallest of the RMS differences of orders 2, 3 and 4 over its white-noise gain
-    (sqrt(6), sqrt(20), sqrt(70)): each is sigma for white noise of sigma per keyframe, and a
-    smooth motion's n-th difference is its n-th derivative times the keyframe interval to the
-    n-th, which the next order shrinks while that interval is short against the motion's
-    period. With the second order alone the figure measured the motion itself as keyframes grew
-    sparse: on EuRoC MH_01's exact ground truth over its first 3 s, 41 with a keyframe every
-    0.1 s, 10.5 every 0.2 s and 4.8 every 0.3 s, under the gate of 10 (with orders 2-4: 221, 49
-    and 13); a still camera's white noise reads 1.7 (median), at most 4.8 over 1000 draws."""
+    the smallest, over the orders n = 2, 3 and 4, of the RMS residual of a keyframe's position
+    against the polynomial of degree n - 1 through its n neighbours (n + 1 consecutive
+    keyframes; the one predicted is the (n // 2)-th), over that residual's white-noise gain
+    (1 + the sum of the squared Lagrange weights): each is sigma for white noise of sigma per
+    keyframe, whatever the keyframes' times ``t_s`` (K,) (None: evenly spaced). Evenly spaced,
+    these are the differences of orders 2, 3 and 4 over sqrt(6), sqrt(20) and sqrt(70). A smooth
+    motion's residual is its n-th derivative times the keyframe interval to the n-th, which the
+    next order shrinks while that interval is short against the motion's period. With the second
+    order alone the figure measured the motion itself as keyframes grew sparse: on EuRoC MH_01's
+    exact ground truth over its first 3 s, 41 with a keyframe every 0.1 s, 10.5 every 0.2 s and
+    4.8 every 0.3 s, under the gate of 10 (with orders 2-4: 221, 49 and 13); a still camera's
+    white noise reads 1.7 (median), at most 4.8 over 1000 draws. Without the times, keyframes
+    0.15 to 1.2 s apart (the VO's at 6.7 frames/s on MH_01 hand-held) read that ground truth as
+    2.7-5.7 (13-84 evenly spaced over the same span): every VI initialisation failed there."""
     c = np.asarray(c_vo, dtype=np.float64)
     if c.shape[0] < 3:
         return 0.0
+    t = np.arange(c.shape[0], dtype=np.float64) if t_s is None else np.asarray(t_s, dtype=np.float64)
+    if t.shape != (c.shape[0],) or np.any(np.diff(t) <= 0.0):
+        raise ShapeError(f"translation_snr: {t.shape} times for {c.shape[0]} positions, increasing")
     span = float(np.max(np.linalg.norm(c - c.mean(axis=0), axis=1)))
     jitter = math.inf
-    for order, gain in ((2, 6.0), (3, 20.0), (4, 70.0)):
+    for order in (2, 3, 4):
         if c.shape[0] > order:
-            d = np.diff(c, n=order, axis=0)
-            jitter = min(jitter, float(np.sqrt(np.mean(np.sum(d**2, axis=1)) / gain)))
+            jitter = min(jitter, _lagrange_jitter(c, t, order))
     if jitter == 0.0:
         return math.inf if span > 0.0 else 0.0
     return span / jitter
+
+
+def _lagrange_jitter(c: F64, t: F64, order: int) -> float:
+    """RMS over the windows of ``order`` + 1 consecutive keyframes of the residual of the
+    (order // 2)-th against the Lagrange polynomial through the others, each over its white-noise
+    gain."""
+    k = order // 2
+    n = c.shape[0] - order
+    win = np.arange(order + 1)[None, :] + np.arange(n)[:, None]  # (n, order + 1) keyframe indices
+    tw = t[win]
+    others = np.delete(np.arange(order + 1), k)
+    x, nodes = tw[:, k], tw[:, others]  # (n,), (n, order)
+    # Lagrange weights of each node at x: prod over the other nodes m of (x - t_m) / (t_j - t_m)
+    w = np.ones((n, order))
+    for j in range(order):
+        for m in range(order):
+            if m != j:
+                w[:, j] *= (x - nodes[:, m]) / (nodes[:, j] - nodes[:, m])
+    resid = c[win[:, k]] - np.einsum("nj,njd->nd", w, c[win[:, others]])
+    gain = 1.0 + np.sum(w**2, axis=1)
+    return float(np.sqrt(np.mean(np.sum(resid**2, axis=1) / gain)))
 
 
 def _move_advice(ex: ViExcitation, cfg: ViInitConfig, needed_m_s2: float) -> str:
