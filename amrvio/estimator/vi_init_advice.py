@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from amrvio.errors import ShapeError
 from amrvio.estimator.vi_init_types import (
@@ -87,7 +87,7 @@ def measure_excitation(
     )
 
 
-def translation_snr(c_vo: F64, t_s: F64 | None = None) -> float:
+def translation_snr(c_vo: F64, t_s: ArrayLike | None = None) -> float:
     """Largest distance of the VO camera from its mean position over its jitter. The jitter is
     the smallest, over the orders n = 2, 3 and 4, of the RMS residual of a keyframe's position
     against the polynomial of degree n - 1 through its n neighbours (n + 1 consecutive
