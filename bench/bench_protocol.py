@@ -75,11 +75,19 @@ class Targets:
         return ", ".join(parts) + (f", {self.extra}" if self.extra else "")
 
 
+def _largest_segment(out: PipelineOutput) -> tuple[int | None, int]:
+    """The map segment with the most TRACKED frames and that count ((None, 0) without one)."""
+    segs = [r.segment for r in out.records if r.status is PoseStatus.TRACKED and r.segment is not None]
+    if not segs:
+        return None, 0
+    big = max(set(segs), key=segs.count)
+    return big, segs.count(big)
+
+
 def _row(name: str, out: PipelineOutput, gt: Trajectory | None, tg: Targets) -> Row:
     n = len(out.records)
     tracked = sum(r.status is PoseStatus.TRACKED for r in out.records)
-    segs = [r.segment for r in out.records if r.status is PoseStatus.TRACKED]
-    in_one = max((segs.count(k) for k in set(segs) if k is not None), default=0)
+    in_one = _largest_segment(out)[1]
     n_segs = len({r.segment for r in out.records if r.segment is not None})
     init = _init_frame(out)
     ate_pct = float("nan")
@@ -147,11 +155,6 @@ def _mh01() -> list[Row]:
 PHONE_TOP_VIEW = Path(__file__).resolve().parent / "results" / "phone_topview.png"
 
 
-def _largest_segment(out: PipelineOutput) -> int | None:
-    segs = [r.segment for r in out.records if r.status is PoseStatus.TRACKED and r.segment is not None]
-    return max(set(segs), key=segs.count) if segs else None
-
-
 def _keyframe_rms_px(out: PipelineOutput, segment: int | None) -> list[float]:
     """The local BA's final RMS reprojection error (pixels, no robust loss) at each keyframe of
     ``segment``."""
@@ -163,10 +166,10 @@ def _keyframe_rms_px(out: PipelineOutput, segment: int | None) -> list[float]:
     return rms
 
 
-def _phone_top_view(out: PipelineOutput, path: Path) -> tuple[float, float]:
+def _phone_top_view(out: PipelineOutput, big: int | None, path: Path) -> tuple[float, float]:
     """Write the top view of the phone's camera path, one colour per map segment (each in its
-    own, guessed, units), to ``path``; the largest segment's largest and median frame-to-frame
-    step (its units)."""
+    own, guessed, units), to ``path``; segment ``big``'s largest and median frame-to-frame step
+    (its units)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -174,7 +177,6 @@ def _phone_top_view(out: PipelineOutput, path: Path) -> tuple[float, float]:
 
     c = out.T_world_cam[:, :3, 3]
     seg = np.array([-1 if r.segment is None else r.segment for r in out.records])
-    big = _largest_segment(out)
     a, b = top_view_axes(c[seg == big])
     fig = Figure(figsize=(7.0, 5.0))
     FigureCanvasAgg(fig)
@@ -201,10 +203,10 @@ def _phone() -> list[Row]:
         return []
     ds = open_dataset(str(PHONE), PHONE / "calib_claimed" / "live.yaml")
     out = run_pipeline(ds, _VO)
-    big = _largest_segment(out)
+    big = _largest_segment(out)[0]
     rms = _keyframe_rms_px(out, big)
     med = float(np.median(rms)) if rms else float("nan")
-    top, typical = _phone_top_view(out, PHONE_TOP_VIEW)
+    top, typical = _phone_top_view(out, big, PHONE_TOP_VIEW)
     return [_row("phone hand-held (no ground truth)", out, None,
                  Targets(max_init=None, min_tracked_pct=90.0, max_ate_pct=None, one_segment=True)),
             {"name": "protocol phone hand-held: median reprojection error, largest segment", "value": med,

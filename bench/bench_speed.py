@@ -503,16 +503,17 @@ print(json.dumps({"frames": frames, "keyframes": kfs, "rss_before_mb": before, "
 FLAT_MIB_PER_MIN = 0.5
 
 
+def _sample_at(per_minute: list[list[float]], minute: float) -> list[float]:
+    """The first sample of a run's trace of (minute driven, peak growth so far MiB, RssAnon MiB)
+    at or after ``minute`` (the last one when none)."""
+    return next((p for p in per_minute if p[0] >= minute - 1e-9), per_minute[-1])
+
+
 def peak_growth_after(per_minute: list[list[float]], warm_min: float) -> tuple[float, float, float]:
-    """From a run's trace of (minute driven, peak growth so far MiB, ...) samples: (the peak
-    growth at the first sample at or after ``warm_min``, at the end, minutes between them)."""
-    at = next((p for p in per_minute if p[0] >= warm_min - 1e-9), per_minute[-1])
-    end = per_minute[-1]
+    """From a run's trace (:func:`_sample_at`): (the peak growth at ``warm_min``, at the end,
+    minutes between them)."""
+    at, end = _sample_at(per_minute, warm_min), per_minute[-1]
     return float(at[1]), float(end[1]), float(end[0] - at[0])
-
-
-def _anon_at(per_minute: list[list[float]], minute: float) -> float:
-    return float(next((p for p in per_minute if p[0] >= minute - 1e-9), per_minute[-1])[2])
 
 
 def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float) -> list[Row]:
@@ -574,7 +575,7 @@ def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float)
                "note": f"the peak resident set above the run's start, read every 5 s of driving in the "
                        f"{minutes[-1]:g} min run: {at:.1f} MiB after {warm:g} min, {end:.1f} MiB at the end"
                        + (" (" + ", ".join(f"{p[1]:.1f} MiB after {p[0]:g} min" for p in marks) + ")" if marks else "")
-                       + f"; the process's anonymous memory (RssAnon) {_anon_at(traces[-1], warm):.1f} MiB "
+                       + f"; the process's anonymous memory (RssAnon) {_sample_at(traces[-1], warm)[2]:.1f} MiB "
                        f"after {warm:g} min and {traces[-1][-1][2]:.1f} MiB at the end"
                        + f". Judged after the first {warm:g} min: the peak is set by short allocations at "
                        "some keyframes (in a 5 min drive, 2026-12-06: at frames 443, 698 and 700, around stops, "
