@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from amrvio.estimator.camera_height import HeightEstimate, estimate_height, smooth_scales
-from amrvio.estimator.local_ba import BAProblem, BAStatus, solve_ba_gtsam, solve_ba_scipy
+from amrvio.estimator.local_ba import BAProblem, BAStatus, cameras_last_ordering, solve_ba_gtsam, solve_ba_scipy
 from amrvio.estimator.local_mapping import Segment
 from amrvio.estimator.mapper import BAReport, Mapper, MapperConfig, TriangulationReport
 from amrvio.estimator.vo_map import PointTable
@@ -380,3 +380,37 @@ def test_anchor_book_keeps_a_long_run_in_about_half_the_memory_of_a_list() -> No
     as_list, as_book = held([]), held(AnchorBook())
     assert as_book < 0.6 * as_list
     assert as_book < 1.2e6
+
+
+def test_gtsam_ba_orders_every_camera_after_every_point(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the fill of a camera eliminated before its points made the local BA's memory peak grow
+    # in steps (amrvio.estimator.local_ba.cameras_last_ordering); a window whose oldest, fixed
+    # camera sees only a few of its points, as at those steps
+    import gtsam
+
+    prob, T, X = _problem(0.3, seed=2)
+    few = (prob.obs_cam != 0) | (prob.obs_point < 12)
+    prob = dataclasses.replace(prob, obs_cam=prob.obs_cam[few], obs_point=prob.obs_point[few],
+                               obs_px=prob.obs_px[few])
+    graphs = []
+    optimizer = gtsam.LevenbergMarquardtOptimizer
+
+    def capture(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+                params: gtsam.LevenbergMarquardtParams) -> gtsam.LevenbergMarquardtOptimizer:
+        graphs.append(graph)
+        return optimizer(graph, values, params)
+
+    monkeypatch.setattr(gtsam, "LevenbergMarquardtOptimizer", capture)
+    out = solve_ba_gtsam(prob, 30)
+    n_pts = len(prob.points)
+    ordering = cameras_last_ordering(graphs[0], n_pts)
+    keys = [ordering.at(i) for i in range(ordering.size())]
+    assert sorted(keys) == list(range(n_pts + 5))
+    assert max(keys[:n_pts]) < n_pts <= min(keys[n_pts:])
+    # the same minimum as the independent NumPy Schur LM
+    from amrvio.estimator.ba_schur import huber_cost, solve_ba_schur
+
+    ref = solve_ba_schur(prob, 30)
+    assert np.allclose(out.T_cam_world[:2], prob.T_cam_world[:2])
+    assert abs(huber_cost(out.residual_px, 2.0) - huber_cost(ref.residual_px, 2.0)) < 1e-6 * huber_cost(ref.residual_px, 2.0)
+    assert np.abs(out.T_cam_world - ref.T_cam_world).max() < 1e-6
