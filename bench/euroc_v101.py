@@ -68,6 +68,41 @@ def gravity_world_from_flight(imu: ImuData, gt: EurocGroundTruth, R_world_body: 
     return np.asarray(mean_acc - f_world.mean(axis=0))
 
 
+def accel_gain(flight: EurocFlight, shift_s: float = 0.0, average_s: float = 0.2) -> tuple[float, F64]:
+    """How much acceleration the accelerometer reads for what the ground truth shows: per world
+    axis, the least-squares slope of the recorded specific force (less the ground-truth bias,
+    rotated into the world with the ground-truth attitude) on the ground truth's acceleration
+    (second derivative of a cubic spline through its positions) plus gravity, both averaged over
+    ``average_s`` and their means removed, over the flight less 1 s at either end. ``shift_s``
+    moves the IMU's stamps (a time offset would lower every slope). The slope over all three axes
+    together, and the (3,) per axis; 1 for a true IMU."""
+    from scipy.interpolate import CubicSpline
+
+    gt = flight.gt
+    if gt.accel_bias is None:
+        raise ValueError("the ground truth has no accelerometer biases")
+    gt_ns = gt.stamps_ns
+    t_gt = (gt_ns - gt_ns[0]).astype(np.float64) * 1e-9
+    imu = flight.imu
+    t = (imu.stamps_ns - gt_ns[0]).astype(np.float64) * 1e-9 + shift_s
+    sel = (t > t_gt[0] + 1.0) & (t < t_gt[-1] - 1.0)
+    t = t[sel]
+    t_ns = gt_ns[0] + np.round(t * 1e9).astype(np.int64)
+    R = gt_rotations_at(gt_ns, flight.R_world_body, t_ns)
+    bias = CubicSpline(t_gt, gt.accel_bias)(t)
+    f_world = np.einsum("nij,nj->ni", R, imu.accel_m_s2[sel] - bias)
+    a_world = CubicSpline(t_gt, flight.p_world_body)(t, 2) - flight.gravity_world
+    n = max(1, int(round(average_s / float(np.median(np.diff(t))))))
+    kernel = np.ones(n) / n
+
+    def smooth(x: F64) -> F64:
+        y = np.stack([np.convolve(x[:, j], kernel, mode="valid") for j in range(3)], axis=1)
+        return np.asarray(y - y.mean(axis=0))
+
+    x, y = smooth(a_world), smooth(f_world)
+    return float(np.sum(x * y) / np.sum(x * x)), np.asarray(np.sum(x * y, axis=0) / np.sum(x * x, axis=0))
+
+
 def load_flight(root: Path = V101) -> EurocFlight:
     """Read the flight (raises the reader's errors when files are missing or malformed)."""
     from amrvio.io.calib import read_euroc_imu
