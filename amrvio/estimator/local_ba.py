@@ -158,12 +158,15 @@ def cameras_last_ordering(graph: gtsam.NonlinearFactorGraph, n_pts: int) -> gtsa
     """GTSAM's COLAMD elimination ordering of a BA graph whose keys below ``n_pts`` are points,
     with every camera key constrained after every point key.
 
-    COLAMD alone mostly orders a window so, but now and then it takes a camera that sees few
-    points (a fixed one, or the newest) before them: at frames 443, 698 and 700 of bench_speed's
-    5 min drive the fill then held peaked 6-12 MiB above the resident set, at 2.5-4x the time,
-    and made the peak memory of a long run grow in steps. Constrained, those three peaked 0.0-0.7
-    MiB, and the drive's 557 problems 0.9 MiB at most at the same median time (dev runs, one
-    process, glibc thresholds as ``amrvio run`` sets them)."""
+    COLAMD alone took a camera that sees few points (a fixed one, or the newest) before them now
+    and then: at frames 443, 698 and 700 of bench_speed's 5 min drive the fill then held peaked
+    6-14 MiB above the resident set, at 2.5-4x the time. Constrained, those three peaked 0.0-1.2
+    MiB, and the drive's 557 problems 0.9 MiB at most in one process, at the same median time.
+    Not every window: where the oldest (fixed) cameras see only 7-28 of the points (frames
+    1526-1532 of the 20 min drive), the cameras' own COLAMD order takes those cameras first and
+    the solve peaks 4-15 MiB (COLAMD alone 0.2-0.8). Points first and then the cameras newest
+    first peaked 0.0-1.2 MiB on all seven windows (dev runs, each problem in a fresh process):
+    the next candidate, not yet run through the benchmarks."""
     import gtsam
 
     cameras = [key for key in graph.keyVector() if key >= n_pts]
