@@ -388,7 +388,7 @@ def test_gtsam_ba_orders_every_camera_after_every_point(monkeypatch: pytest.Monk
     # camera sees only a few of its points, as at those steps
     import gtsam
 
-    prob, T, X = _problem(0.3, seed=2)
+    prob, _, _ = _problem(0.3, seed=2)
     few = (prob.obs_cam != 0) | (prob.obs_point < 12)
     prob = dataclasses.replace(prob, obs_cam=prob.obs_cam[few], obs_point=prob.obs_point[few],
                                obs_px=prob.obs_px[few])
