@@ -175,8 +175,9 @@ GAIN_SHIFTS_S = tuple(round(0.005 * k, 3) for k in range(-6, 7))
 def _gain_rows(flight: EurocFlight) -> list[Row]:
     """The recorded accelerometer against the ground truth (:func:`bench.euroc_v101.accel_gain`),
     and the best it gets over time shifts of the IMU's stamps; the synthetic control's for scale."""
-    gain, per_axis = accel_gain(flight)
-    shifted = {s: accel_gain(flight, s)[0] for s in GAIN_SHIFTS_S}
+    gains = {s: accel_gain(flight, s) for s in GAIN_SHIFTS_S}  # 0.0 among them: the unshifted one
+    gain, per_axis = gains[0.0]
+    shifted = {s: g[0] for s, g in gains.items()}
     best = max(shifted, key=lambda s: shifted[s])
     control, _ = accel_gain(synthetic_flight(flight))
     axes = " / ".join(f"{g:.4f}" for g in per_axis)
