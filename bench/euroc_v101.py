@@ -68,14 +68,9 @@ def gravity_world_from_flight(imu: ImuData, gt: EurocGroundTruth, R_world_body: 
     return np.asarray(mean_acc - f_world.mean(axis=0))
 
 
-def accel_gain(flight: EurocFlight, shift_s: float = 0.0, average_s: float = 0.2) -> tuple[float, F64]:
-    """How much acceleration the accelerometer reads for what the ground truth shows: per world
-    axis, the least-squares slope of the recorded specific force (less the ground-truth bias,
-    rotated into the world with the ground-truth attitude) on the ground truth's acceleration
-    (second derivative of a cubic spline through its positions) plus gravity, both averaged over
-    ``average_s`` and their means removed, over the flight less 1 s at either end. ``shift_s``
-    moves the IMU's stamps (a time offset would lower every slope). The slope over all three axes
-    together, and the (3,) per axis; 1 for a true IMU."""
+def _accel_series(flight: EurocFlight, shift_s: float, average_s: float) -> tuple[F64, F64]:
+    """(N, 3) ground-truth acceleration plus gravity and (N, 3) recorded specific force in the
+    world, averaged over ``average_s`` and their means removed (see :func:`accel_gain`)."""
     from scipy.interpolate import CubicSpline
 
     gt = flight.gt
@@ -99,8 +94,30 @@ def accel_gain(flight: EurocFlight, shift_s: float = 0.0, average_s: float = 0.2
         y = np.stack([np.convolve(x[:, j], kernel, mode="valid") for j in range(3)], axis=1)
         return np.asarray(y - y.mean(axis=0))
 
-    x, y = smooth(a_world), smooth(f_world)
+    return smooth(a_world), smooth(f_world)
+
+
+def accel_gain(flight: EurocFlight, shift_s: float = 0.0, average_s: float = 0.2) -> tuple[float, F64]:
+    """How much acceleration the accelerometer reads for what the ground truth shows: per world
+    axis, the least-squares slope of the recorded specific force (less the ground-truth bias,
+    rotated into the world with the ground-truth attitude) on the ground truth's acceleration
+    (second derivative of a cubic spline through its positions) plus gravity, both averaged over
+    ``average_s`` and their means removed, over the flight less 1 s at either end. ``shift_s``
+    moves the IMU's stamps (a time offset would lower every slope). The slope over all three axes
+    together, and the (3,) per axis; 1 for a true IMU."""
+    x, y = _accel_series(flight, shift_s, average_s)
     return float(np.sum(x * y) / np.sum(x * x)), np.asarray(np.sum(x * y, axis=0) / np.sum(x * x, axis=0))
+
+
+def accel_gain_bracket(flight: EurocFlight, average_s: float) -> tuple[float, float]:
+    """(low, high) bounds of the accelerometer's gain over ``average_s`` averages, whatever noise
+    either side carries: noise in the ground truth's differentiated acceleration (the regressor)
+    lowers :func:`accel_gain`'s slope below the gain, noise in the accelerometer raises the
+    inverse of the reverse slope (ground truth on accelerometer) above it, so the gain lies
+    between the two (noise independent of the motion). All axes pooled."""
+    x, y = _accel_series(flight, 0.0, average_s)
+    xy = float(np.sum(x * y))
+    return xy / float(np.sum(x * x)), float(np.sum(y * y)) / xy
 
 
 def load_flight(root: Path = V101) -> EurocFlight:
