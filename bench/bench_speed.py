@@ -578,9 +578,9 @@ def memory_rows(minutes: tuple[float, ...], width: int, height: int, fps: float)
                        + f"; the process's anonymous memory (RssAnon) {_sample_at(traces[-1], warm)[2]:.1f} MiB "
                        f"after {warm:g} min and {traces[-1][-1][2]:.1f} MiB at the end"
                        + f". Judged after the first {warm:g} min: the peak is set by short allocations at "
-                       "some keyframes, GTSAM's local BA on windows whose fixed cameras see few points (2026-12-06: "
-                       "4-15 MiB above the resident set at frames 1526-1532 of the 20 min drive; "
-                       "amrvio.estimator.local_ba.cameras_last_ordering), which a shorter drive may not reach, "
+                       "some keyframes, chiefly the fill of GTSAM's local BA (the elimination ordering "
+                       "amrvio.estimator.local_ba.points_then_newest_cameras keeps it small), which a shorter "
+                       "drive may not reach, "
                        "and separate runs of the same code differ by 5-10 MiB (the rows between runs below)"}
         if minutes[-1] - warm >= 10.0:  # judged on the full run, not the quick one's
             row.update({"target": f"flat: <= {FLAT_MIB_PER_MIN:g} MiB per minute",

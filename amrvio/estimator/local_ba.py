@@ -2,7 +2,7 @@
 
 Interchangeable back-ends on the same problem (chosen by measured speed, bench/bench_vo.py):
 - ``solve_ba_scipy``: SciPy ``least_squares`` (TRF, Huber, analytic sparse Jacobian, LSMR);
-- ``solve_ba_gtsam``: GTSAM Levenberg-Marquardt, SEQUENTIAL_CHOLESKY (COLAMD, cameras last), robust projection factors;
+- ``solve_ba_gtsam``: GTSAM Levenberg-Marquardt, SEQUENTIAL_CHOLESKY (points, then cameras newest first), robust projection factors;
 - ``estimator.ba_schur.solve_ba_schur``: the same LM in NumPy, points eliminated first.
 Gauge: poses flagged ``fixed`` are held constant (fix two poses in monocular BA: 7 DoF).
 """
@@ -154,27 +154,36 @@ def solve_ba_scipy(prob: BAProblem, max_iterations: int = 10) -> BAResult:
     return BAResult(T, X, _pixel_errors(prob, T, X), int(res.nfev), initial)
 
 
-def cameras_last_ordering(graph: gtsam.NonlinearFactorGraph, n_pts: int) -> gtsam.Ordering:
-    """GTSAM's COLAMD elimination ordering of a BA graph whose keys below ``n_pts`` are points,
-    with every camera key constrained after every point key.
+def points_then_newest_cameras(graph: gtsam.NonlinearFactorGraph, n_pts: int) -> gtsam.Ordering:
+    """The elimination ordering of a BA graph whose keys below ``n_pts`` are points and the rest
+    cameras, oldest first: every point in index order, then the cameras newest first.
 
-    COLAMD alone took a camera that sees few points (a fixed one, or the newest) before them now
-    and then: at frames 443, 698 and 700 of bench_speed's 5 min drive the fill then held peaked
-    6-14 MiB above the resident set, at 2.5-4x the time. Constrained, those three peaked 0.0-1.2
-    MiB, and the drive's 557 problems 0.9 MiB at most in one process, at the same median time.
-    Not every window: where the oldest (fixed) cameras see only 7-28 of the points (frames
-    1526-1532 of the 20 min drive), the cameras' own COLAMD order takes those cameras first and
-    the solve peaks 4-15 MiB (COLAMD alone 0.2-0.8). Points first and then the cameras newest
-    first peaked 0.0-1.2 MiB on all seven windows (dev runs, each problem in a fresh process):
-    the next candidate, not yet run through the benchmarks."""
+    Eliminating a point leaves a dense factor over the cameras that see it; eliminating a camera
+    before its points joins all of them. GTSAM's COLAMD (its default) took a camera that sees few
+    points (a fixed one, or the newest) early now and then: at frames 443, 698 and 700 of
+    bench_speed's 5 min drive its fill peaked 6-14 MiB above the resident set, at 2.5-4x the time,
+    and those steps set the memory peak's growth. COLAMD with the cameras constrained last took
+    them out, but ordered the cameras by its own rule, and where the oldest, fixed cameras see only
+    7-28 of the points (frames 1526-1532 of the 20 min drive) it took those first and peaked 4-15
+    MiB. This ordering, the one COLAMD itself chooses on most windows, peaked 0.0-1.2 MiB on all
+    seven of those windows and 0.8 MiB at most over the 557 problems of the 5 min drive, at the
+    same median time (dev runs, each heavy window in a fresh process)."""
     import gtsam
 
-    cameras = [key for key in graph.keyVector() if key >= n_pts]
-    return gtsam.Ordering.ColamdConstrainedLastNonlinearFactorGraph(graph, cameras, False)
+    ordering = gtsam.Ordering()
+    keys = list(graph.keyVector())
+    for key in keys:
+        if key < n_pts:
+            ordering.push_back(key)
+    for key in reversed(keys):
+        if key >= n_pts:
+            ordering.push_back(key)
+    return ordering
 
 
 def solve_ba_gtsam(prob: BAProblem, max_iterations: int = 10) -> BAResult:
-    """GTSAM LM with SEQUENTIAL_CHOLESKY, cameras ordered last; Huber-robust GenericProjectionFactorCal3_S2."""
+    """GTSAM LM with SEQUENTIAL_CHOLESKY (points, then cameras newest first); Huber-robust
+    GenericProjectionFactorCal3_S2."""
     import gtsam
 
     initial = _pixel_errors(prob, prob.T_cam_world, prob.points)
@@ -213,7 +222,7 @@ def solve_ba_gtsam(prob: BAProblem, max_iterations: int = 10) -> BAResult:
     params.setLinearSolverType("SEQUENTIAL_CHOLESKY")
     params.setMaxIterations(max_iterations)
     params.setRelativeErrorTol(1e-6)
-    params.setOrdering(cameras_last_ordering(graph, n_pts))
+    params.setOrdering(points_then_newest_cameras(graph, n_pts))
     opt = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
     out = opt.optimize()
     T = np.empty_like(prob.T_cam_world)
@@ -226,5 +235,5 @@ def solve_ba_gtsam(prob: BAProblem, max_iterations: int = 10) -> BAResult:
     return BAResult(T, X, _pixel_errors(prob, T, X), int(opt.iterations()), initial)
 
 
-__all__ = ["BAProblem", "BAReport", "BAResult", "BAStatus", "cameras_last_ordering", "reprojection_errors",
+__all__ = ["BAProblem", "BAReport", "BAResult", "BAStatus", "points_then_newest_cameras", "reprojection_errors",
            "solve_ba_gtsam", "solve_ba_scipy"]
