@@ -2,7 +2,8 @@
 
 Interchangeable back-ends on the same problem (chosen by measured speed, bench/bench_vo.py):
 - ``solve_ba_scipy``: SciPy ``least_squares`` (TRF, Huber, analytic sparse Jacobian, LSMR);
-- ``solve_ba_gtsam``: GTSAM Levenberg-Marquardt, SEQUENTIAL_CHOLESKY (points, then cameras newest first), robust projection factors;
+- ``solve_ba_gtsam``: GTSAM Levenberg-Marquardt, SEQUENTIAL_CHOLESKY (points, then cameras newest first),
+  robust projection factors;
 - ``estimator.ba_schur.solve_ba_schur``: the same LM in NumPy, points eliminated first.
 Gauge: poses flagged ``fixed`` are held constant (fix two poses in monocular BA: 7 DoF).
 """
