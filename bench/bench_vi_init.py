@@ -172,14 +172,14 @@ def _rows(tag: str, s: dict[str, float], note: str) -> list[Row]:
 GAIN_SHIFTS_S = tuple(round(0.005 * k, 3) for k in range(-6, 7))
 
 
-def _gain_rows(flight: EurocFlight) -> list[Row]:
+def _gain_rows(flight: EurocFlight, synthetic: EurocFlight) -> list[Row]:
     """The recorded accelerometer against the ground truth (:func:`bench.euroc_v101.accel_gain`),
-    and the best it gets over time shifts of the IMU's stamps; the synthetic control's for scale."""
+    and the best it gets over time shifts of the IMU's stamps; ``synthetic`` (the flight with its
+    IMU synthesised from the ground truth) for scale."""
     gains = {s: accel_gain(flight, s) for s in GAIN_SHIFTS_S}  # 0.0 among them: the unshifted one
     gain, per_axis = gains[0.0]
     shifted = {s: g[0] for s, g in gains.items()}
     best = max(shifted, key=lambda s: shifted[s])
-    synthetic = synthetic_flight(flight)
     control, _ = accel_gain(synthetic)
     axes = " / ".join(f"{g:.4f}" for g in per_axis)
     low, high = accel_gain_bracket(flight, 1.0)
@@ -208,8 +208,8 @@ def run(quick: bool) -> list[Row]:
     note = (f"{WINDOW_S:g} s windows every {5 if quick else 1} s, 10 Hz keyframes, pose noise "
             f"{POS_SIGMA_M * 1e3:g} mm / {ROT_SIGMA_DEG:g} deg, scale {SCALE}")
     rows = _rows("recorded IMU", summary(sweep(flight, window_starts(flight, WINDOW_S, 5.0 if quick else 1.0))), note)
-    rows += _gain_rows(flight)
     control = synthetic_flight(flight)
+    rows += _gain_rows(flight, control)
     return rows + _rows("synthetic IMU", summary(sweep(control, window_starts(control, WINDOW_S, 5.0))),
                         note.replace("every 1 s", "every 5 s") + "; IMU synthesised from the ground truth")
 

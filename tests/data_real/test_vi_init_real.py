@@ -101,12 +101,13 @@ def test_recorded_accelerometer_reads_short_of_the_ground_truth_and_the_control_
     gain, per_axis = accel_gain(flight)
     assert 0.985 < gain < 0.995 and all(0.985 < g < 0.995 for g in per_axis)
     assert max(accel_gain(flight, s)[0] for s in (-0.02, -0.01, 0.01, 0.02)) < 0.995
-    control, control_axes = accel_gain(synthetic_flight(flight))
+    synthetic = synthetic_flight(flight)
+    control, control_axes = accel_gain(synthetic)
     assert abs(control - 1.0) < 0.003 and all(abs(g - 1.0) < 0.003 for g in control_axes)
     # not noise in the differentiated ground truth (which lowers that slope alone): over 1 s
     # averages the bracket that holds the gain whatever noise either side carries lies below 1
     # (measured 0.9902-0.9928), and the control's holds it (1.0002-1.0002)
     low, high = accel_gain_bracket(flight, 1.0)
     assert low <= high < 0.996
-    c_low, c_high = accel_gain_bracket(synthetic_flight(flight), 1.0)
+    c_low, c_high = accel_gain_bracket(synthetic, 1.0)
     assert c_low <= c_high and abs(c_low - 1.0) < 0.002 and abs(c_high - 1.0) < 0.002
