@@ -11,12 +11,14 @@ with ``-(accel - b_a_gt)`` to 0.01 deg, while -z would be off by 0.24 deg.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from amrvio.imu.static_init import StaticInitResult, initial_static_init
 from amrvio.io.base import read_imu_csv
 from amrvio.io.calib import read_euroc_sensor_T_BS
 from amrvio.io.trajectory import EurocGroundTruth, read_euroc_csv
@@ -159,3 +161,38 @@ def synthetic_flight(flight: EurocFlight, seed: int = 0) -> EurocFlight:
     from dataclasses import replace
 
     return replace(flight, imu=ImuData(stamps, gyro, accel), gravity_world=np.array(GRAVITY_WORLD, dtype=np.float64))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class StaticCheck:
+    """The static initialisation on the flight's first (still) seconds against the ground truth:
+    ``result``; ``tilt_err_deg``: the angle between its gravity direction and the one the ground
+    truth implies (its rotations applied to ``gravity_world``, averaged over the window);
+    ``gyro_bias_err_rad_s`` (3,): its gyro bias less the ground truth's mean ``b_w`` over the
+    window; ``accel_bias_up_err_m_s2``: its accelerometer bias along gravity (the observable part)
+    less the ground truth's."""
+
+    result: StaticInitResult
+    tilt_err_deg: float
+    gyro_bias_err_rad_s: F64
+    accel_bias_up_err_m_s2: float
+
+
+def static_init_check(flight: EurocFlight) -> StaticCheck:
+    """:func:`amrvio.imu.static_init.initial_static_init` on ``flight`` and its errors
+    (:class:`StaticCheck`). Raises ValueError when it does not return a result to compare."""
+    res = initial_static_init(flight.imu, noise=flight.noise)
+    if res.gravity_body is None or res.gyro_bias_rad_s is None or flight.gt.gyro_bias is None \
+            or flight.gt.accel_bias is None:
+        raise ValueError(f"static initialisation gave no gravity or gyro bias ({res.status.value}), or the ground "
+                         "truth has no biases")
+    t0 = int(flight.imu.stamps_ns[0])
+    window = flight.imu.window(t0, t0 + round(res.duration_s * 1e9))
+    R = gt_rotations_at(flight.gt.stamps_ns, flight.R_world_body, window.stamps_ns)
+    g_body = np.einsum("nji,j->ni", R, flight.gravity_world).mean(axis=0)
+    cos = float(g_body @ res.gravity_body / (np.linalg.norm(g_body) * np.linalg.norm(res.gravity_body)))
+    tilt = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+    sel = (flight.gt.stamps_ns >= t0) & (flight.gt.stamps_ns <= int(window.stamps_ns[-1]))
+    bg_err = np.asarray(res.gyro_bias_rad_s) - flight.gt.gyro_bias[sel].mean(axis=0)
+    ba_up_true = float(flight.gt.accel_bias[sel].mean(axis=0) @ (-g_body / np.linalg.norm(g_body)))
+    return StaticCheck(res, tilt, bg_err, float(res.accel_bias_up_m_s2) - ba_up_true)
