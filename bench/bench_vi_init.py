@@ -21,8 +21,13 @@ time-varying biases, the datasheet's white noise).
 The table has one row per window: start, excitation (acceleration spread per camera axis, rotation
 range), status, condition number, scale error and std, gravity error and std. Every window is
 solved (``solve_degenerate``) so that the windows not called OK have a scale to compare. The
-summary: the worst errors of the windows called OK, the median scale error of the others, the mean
-error, and how often the error lies within 3 reported standard deviations.
+summary: the worst errors of the windows called OK, the median scale error of the others, the RMS
+scale error of each group (issue 10 asks that the windows the report calls degenerate really give
+worse scale), the mean error, and how often the error lies within 3 reported standard deviations.
+On the recorded IMU the two RMS figures come out alike: the accelerometer's gain error is common
+to every window, and the OK gate (the scale's reported standard deviation) sees only the noise
+part. With 4 s windows (``--window 4``) none is OK, and the 2 windows called
+``insufficient_excitation`` err by thousands of per cent.
 
 First, the static initialisation on the flight's first seconds (the MAV stands still 5.2 s):
 its gravity direction and gyro bias against the ground truth's (issue 10: 0.5 deg, 2e-3 rad/s).
@@ -158,6 +163,8 @@ def summary(outcomes: list[WindowOutcome]) -> dict[str, float]:
         "ok_max_scale_err": max((abs(o.scale_err) for o in ok), default=nan),
         "ok_max_gravity_err_deg": max((o.gravity_err_deg for o in ok), default=nan),
         "not_ok_median_scale_err": float(np.median([abs(o.scale_err) for o in bad])) if bad else nan,
+        "ok_rms_scale_err": float(np.sqrt(np.mean([o.scale_err ** 2 for o in ok]))) if ok else nan,
+        "not_ok_rms_scale_err": float(np.sqrt(np.mean([o.scale_err ** 2 for o in bad]))) if bad else nan,
         "not_ok_share_over_2pct": float(np.mean([abs(o.scale_err) > 0.02 for o in bad])) if bad else nan,
         "mean_scale_err": float(np.mean([o.scale_err for o in solved])) if solved else nan,
         "share_within_3_std": float(np.mean([v < 3.0 for v in z])) if z else nan,
@@ -173,6 +180,10 @@ def _rows(tag: str, s: dict[str, float], note: str) -> list[Row]:
          "note": "goal <= 1"},
         {"name": f"vi_init {tag}: not OK, median scale error", "value": 100 * s["not_ok_median_scale_err"],
          "unit": "%", "note": "solved anyway"},
+        {"name": f"vi_init {tag}: OK, RMS scale error", "value": 100 * s["ok_rms_scale_err"], "unit": "%",
+         "note": "against the not-OK windows' row below: does the gate pick the better windows"},
+        {"name": f"vi_init {tag}: not OK, RMS scale error", "value": 100 * s["not_ok_rms_scale_err"], "unit": "%",
+         "note": "solved anyway"},
         {"name": f"vi_init {tag}: mean scale error", "value": 100 * s["mean_scale_err"], "unit": "%",
          "note": "all windows solved"},
         {"name": f"vi_init {tag}: error within 3 reported std", "value": 100 * s["share_within_3_std"], "unit": "%",
