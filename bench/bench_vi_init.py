@@ -27,7 +27,7 @@ worse scale), the mean error, and how often the error lies within 3 reported sta
 On the recorded IMU the two RMS figures come out alike: the accelerometer's gain error is common
 to every window, and the OK gate (the scale's reported standard deviation) sees only the noise
 part. With 4 s windows (``--window 4``) none is OK, and the 2 windows called
-``insufficient_excitation`` (at the take-off) err by 29 % and 8 197 %.
+``insufficient_excitation`` (the MAV standing before take-off) err by 29 % and 8 197 %.
 
 First, the static initialisation on the flight's first seconds (the MAV stands still 5.2 s):
 its gravity direction and gyro bias against the ground truth's (issue 10: 0.5 deg, 2e-3 rad/s).
