@@ -52,6 +52,7 @@ from bench.euroc_v101 import (
     EurocFlight,
     accel_gain,
     accel_gain_bracket,
+    angle_deg,
     load_flight,
     static_init_check,
     synthetic_flight,
@@ -114,9 +115,7 @@ def run_case(flight: EurocFlight, case: WindowCase, config: ViInitConfig | None 
     res = initialize_vi(case.stamps_ns, case.T_vo_cam, flight.imu, flight.T_body_cam, flight.noise, cfg)
     if res.state is None:
         return WindowOutcome(case, res, float("nan"), float("nan"))
-    g = res.state.gravity_vo
-    cos = float(g @ case.gravity_vo / (np.linalg.norm(g) * np.linalg.norm(case.gravity_vo)))
-    return WindowOutcome(case, res, res.state.scale / SCALE - 1.0, math.degrees(math.acos(min(1.0, max(-1.0, cos)))))
+    return WindowOutcome(case, res, res.state.scale / SCALE - 1.0, angle_deg(res.state.gravity_vo, case.gravity_vo))
 
 
 def window_starts(flight: EurocFlight, window_s: float, step_s: float) -> list[float]:

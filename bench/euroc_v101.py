@@ -46,6 +46,12 @@ class EurocFlight:
     gravity_world: F64
 
 
+def angle_deg(a: F64, b: F64) -> float:
+    """The angle between two (3,) vectors, degrees."""
+    cos = float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
+    return math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+
+
 def gt_rotations_at(gt_ns: I64, R: F64, t_ns: I64) -> F64:
     """Ground-truth rotations (M, 3, 3) at ``t_ns`` (inside the ground truth), geodesic interpolation."""
     idx = np.clip(np.searchsorted(gt_ns, t_ns, side="right") - 1, 0, len(gt_ns) - 2)
@@ -190,8 +196,7 @@ def static_init_check(flight: EurocFlight) -> StaticCheck:
     window = flight.imu.window(t0, t0 + round(res.duration_s * 1e9))
     R = gt_rotations_at(flight.gt.stamps_ns, flight.R_world_body, window.stamps_ns)
     g_body = np.einsum("nji,j->ni", R, flight.gravity_world).mean(axis=0)
-    cos = float(g_body @ res.gravity_body / (np.linalg.norm(g_body) * np.linalg.norm(res.gravity_body)))
-    tilt = math.degrees(math.acos(min(1.0, max(-1.0, cos))))
+    tilt = angle_deg(g_body, res.gravity_body)
     sel = (flight.gt.stamps_ns >= t0) & (flight.gt.stamps_ns <= int(window.stamps_ns[-1]))
     bg_err = np.asarray(res.gyro_bias_rad_s) - flight.gt.gyro_bias[sel].mean(axis=0)
     ba_up_true = float(flight.gt.accel_bias[sel].mean(axis=0) @ (-g_body / np.linalg.norm(g_body)))
